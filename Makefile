@@ -1,0 +1,45 @@
+# Set-up and entry points. `make demo` and `make test` each do the whole set-up on a fresh
+# Debian machine with Python 3.11, then run.
+PYTHON ?= python3.11
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+SYS_STAMP := $(VENV)/.system-packages
+DEMO_DRIVE ?= demo_output/sample_drive
+
+.PHONY: setup system-packages demo test lint bench clean
+
+setup: $(STAMP)
+
+# open3d links against libusb and libgomp at import time.
+$(SYS_STAMP):
+	@if ! ldconfig -p | grep -q libusb-1.0.so.0 || ! ldconfig -p | grep -q libgomp.so.1; then \
+		SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
+		$$SUDO apt-get update -qq && $$SUDO apt-get install -y -qq libusb-1.0-0 libgomp1; \
+	fi
+	@mkdir -p $(VENV) && touch $@
+
+$(STAMP): pyproject.toml $(SYS_STAMP)
+	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/pip install -q --upgrade pip
+	# torch pinned first: an unpinned torch pulls a multi-GB CUDA build.
+	$(BIN)/pip install -q torch==2.13.0
+	$(BIN)/pip install -q -e '.[dev]'
+	@touch $@
+
+demo: setup
+	$(BIN)/guardrail demo --out $(DEMO_DRIVE)
+
+lint: setup
+	$(BIN)/ruff check guardrail_core app tests benchmarks
+	$(BIN)/ruff format --check guardrail_core app tests benchmarks
+	$(BIN)/mypy
+
+test: lint
+	$(BIN)/pytest -n 2 -q
+
+bench: setup
+	$(BIN)/python benchmarks/bench_simulate.py
+
+clean:
+	rm -rf $(VENV) demo_output .pytest_cache .ruff_cache .mypy_cache

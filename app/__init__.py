@@ -1,0 +1,1 @@
+"""The review app (FastAPI + viser); arrives with the review issue."""

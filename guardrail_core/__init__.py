@@ -1,0 +1,1 @@
+"""guardrail: find, reconstruct and review guardrails in mobile-mapping data."""

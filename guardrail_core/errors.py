@@ -1,0 +1,44 @@
+"""The project's named errors.
+
+Every failure a user can cause (a missing file, a malformed drive, a bad scene spec) raises a
+subclass of :class:`GuardrailError` whose message says what was expected and what came. The CLI
+prints the message and exits with status 2 instead of a traceback.
+"""
+
+from __future__ import annotations
+
+
+class GuardrailError(Exception):
+    """Base of every user-facing error of the project."""
+
+
+class DriveError(GuardrailError):
+    """A drive folder cannot be read or written as the drive format requires."""
+
+
+class MissingDriveFileError(DriveError):
+    """A file the drive format requires is absent."""
+
+
+class DriveFormatError(DriveError):
+    """A drive file exists but its content does not follow the format (keys, types, version)."""
+
+
+class DriveDimensionError(DriveError):
+    """An array of the drive has the wrong shape or a LAS file lacks a required dimension."""
+
+
+class TimestampMismatchError(DriveError):
+    """Times of points, trajectory or images do not agree with each other."""
+
+
+class NonFiniteCoordinatesError(DriveError):
+    """Coordinates or times contain NaN or infinity."""
+
+
+class SceneSpecError(GuardrailError):
+    """A scene or design spec (YAML) is malformed or refers to something unknown."""
+
+
+class OutputExistsError(GuardrailError):
+    """The output folder exists and is not empty; nothing is overwritten without asking."""

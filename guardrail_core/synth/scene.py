@@ -1,0 +1,429 @@
+"""Scene specs (YAML) and the scenes built from them: meshes with truth, the road, the vehicle.
+
+A spec is a mapping with the keys ``road``, ``vehicle``, ``guardrails`` and ``objects`` (see
+``docs/scene-spec.md`` and ``data_samples/scenes/``). :func:`random_scene_spec` writes one from a
+seed; :func:`build_scene` turns a spec into meshes and ``truth/objects.json`` records.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from guardrail_core.errors import SceneSpecError
+from guardrail_core.synth.confounders import CONFOUNDER_KINDS, build_confounder
+from guardrail_core.synth.designs import list_designs, load_design
+from guardrail_core.synth.guardrail import build_guardrail_run
+from guardrail_core.synth.materials import PAINTS
+from guardrail_core.synth.mesh import MeshBuilder, SceneMesh
+from guardrail_core.synth.road import SIDES, Road, RoadSpec
+from guardrail_core.synth.vehicle import VehicleParams
+
+SCENES_DIR = Path(__file__).resolve().parents[2] / "data_samples" / "scenes"
+
+#: Japan Plane Rectangular CS IX (JGD2011), where Tokyo's streets are mapped.
+DEFAULT_CRS = "EPSG:6677"
+DEFAULT_ORIGIN = (-7400.0, -34700.0, 40.0)
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A built scene.
+
+    Attributes
+    ----------
+    spec : dict, the spec it was built from (normalised)
+    road : Road
+    vehicle : VehicleParams
+    drive_span : (s_start, s_end) metres along the road that the vehicle drives
+    mesh : SceneMesh, every surface with its truth
+    objects : list of dict, truth records (``truth/objects.json``)
+    crs : str; origin : (3,) float64 map coordinates of the local frame's origin
+    """
+
+    spec: dict
+    road: Road
+    vehicle: VehicleParams
+    drive_span: tuple[float, float]
+    mesh: SceneMesh
+    objects: list[dict]
+    crs: str
+    origin: np.ndarray
+
+
+# ----------------------------------------------------------------------------- reading specs
+
+
+def load_scene_spec(path: str | os.PathLike) -> dict:
+    """Read a scene spec YAML file (a bare name resolves in ``data_samples/scenes``)."""
+    p = Path(path)
+    if not p.exists() and (SCENES_DIR / f"{p}.yaml").exists():
+        p = SCENES_DIR / f"{p}.yaml"
+    if not p.is_file():
+        raise SceneSpecError(f"{path}: no such scene spec (shipped: {', '.join(list_scenes())})")
+    try:
+        spec = yaml.safe_load(p.read_text())
+    except yaml.YAMLError as exc:
+        raise SceneSpecError(f"{p}: not valid YAML ({exc})") from exc
+    if not isinstance(spec, dict):
+        raise SceneSpecError(f"{p}: a scene spec is a mapping with road, vehicle, guardrails, objects")
+    spec.setdefault("name", p.stem)
+    return spec
+
+
+def list_scenes() -> list[str]:
+    return sorted(p.stem for p in SCENES_DIR.glob("*.yaml"))
+
+
+def _get(mapping: dict, key: str, kind: type, where: str, default: Any = ...) -> Any:
+    """``mapping[key]`` checked to be of ``kind`` (float accepts ints), or ``default``."""
+    if key not in mapping:
+        if default is ...:
+            raise SceneSpecError(f"{where}: missing key {key!r}")
+        return default
+    value = mapping[key]
+    if kind is float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise SceneSpecError(f"{where}.{key}: expected a number, got {value!r}")
+        return float(value)
+    if not isinstance(value, kind):
+        raise SceneSpecError(f"{where}.{key}: expected {getattr(kind, '__name__', kind)}, got {value!r}")
+    return value
+
+
+def _road_spec(data: dict) -> RoadSpec:
+    where = "road"
+    if not isinstance(data, dict):
+        raise SceneSpecError("road: expected a mapping")
+    pieces = _get(data, "centreline", list, where)
+    segments = []
+    for i, piece in enumerate(pieces):
+        w = f"road.centreline[{i}]"
+        if isinstance(piece, dict) and "straight" in piece:
+            length = _get(piece, "straight", float, w)
+            segments.append(("straight", length, 0.0))
+        elif isinstance(piece, dict) and "arc" in piece:
+            arc = _get(piece, "arc", dict, w)
+            radius = _get(arc, "radius", float, w + ".arc")
+            if radius < 20:
+                raise SceneSpecError(f"{w}.arc.radius: {radius} m is tighter than any road (>= 20 m)")
+            if "angle_deg" in arc:
+                angle = np.deg2rad(_get(arc, "angle_deg", float, w + ".arc"))
+            else:
+                angle = _get(arc, "length", float, w + ".arc") / radius
+            segments.append(("arc", abs(angle) * radius, float(np.sign(angle) / radius)))
+        else:
+            raise SceneSpecError(f"{w}: expected {{straight: LENGTH}} or {{arc: {{radius, angle_deg}}}}")
+        if segments[-1][1] <= 0:
+            raise SceneSpecError(f"{w}: length must be positive")
+    if not segments:
+        raise SceneSpecError("road.centreline: needs at least one piece")
+    curb = _get(data, "curb", dict, where, {})
+    sidewalk = _get(data, "sidewalk", dict, where, {})
+    lanes = int(_get(data, "lanes", int, where, 2))
+    if lanes < 1:
+        raise SceneSpecError("road.lanes: at least one lane")
+    return RoadSpec(
+        segments=tuple(segments),
+        heading_deg=_get(data, "heading_deg", float, where, 0.0),
+        lanes=lanes,
+        lane_width=_get(data, "lane_width", float, where, 3.25),
+        crown_slope=_get(data, "crown_percent", float, where, 2.0) / 100,
+        grade=_get(data, "grade_percent", float, where, 1.0) / 100,
+        undulation_m=_get(data, "undulation_m", float, where, 0.3),
+        curb_height=_get(curb, "height", float, "road.curb", 0.15),
+        curb_width=_get(curb, "width", float, "road.curb", 0.18),
+        sidewalk_left=_get(sidewalk, "left", float, "road.sidewalk", 2.5),
+        sidewalk_right=_get(sidewalk, "right", float, "road.sidewalk", 2.5),
+        verge=_get(data, "verge", float, where, 6.0),
+    )
+
+
+def _vehicle(data: dict, road: Road) -> tuple[VehicleParams, tuple[float, float]]:
+    where = "vehicle"
+    speed = _get(data, "speed_mps", list, where, [8.0, 12.0])
+    if len(speed) != 2 or not 1.0 <= float(speed[0]) <= float(speed[1]) <= 40.0:
+        raise SceneSpecError(f"vehicle.speed_mps: expected [min, max] within 1..40 m/s, got {speed}")
+    lane = int(_get(data, "lane", int, where, 0))
+    if not 0 <= lane < road.spec.lanes:
+        raise SceneSpecError(f"vehicle.lane: {lane} is not a lane of a {road.spec.lanes}-lane road")
+    start = _get(data, "start", float, where, min(20.0, road.length / 4))
+    end = _get(data, "end", float, where, road.length - min(20.0, road.length / 4))
+    if not 0 <= start < end <= road.length:
+        raise SceneSpecError(f"vehicle: start {start} and end {end} must lie on the road (0..{road.length:.1f} m)")
+    params = VehicleParams(speed_mps=(float(speed[0]), float(speed[1])), lane=lane)
+    return params, (start, end)
+
+
+def _side(item: dict, where: str) -> str:
+    side = _get(item, "side", str, where)
+    if side not in SIDES:
+        raise SceneSpecError(f"{where}.side: expected left or right, got {side!r}")
+    return side
+
+
+def _paint(item: dict, where: str, rng: np.random.Generator) -> str:
+    paint = _get(item, "paint", str, where, str(rng.choice(list(PAINTS))))
+    if paint not in PAINTS:
+        raise SceneSpecError(f"{where}.paint: unknown paint {paint!r} (known: {', '.join(PAINTS)})")
+    return paint
+
+
+# ----------------------------------------------------------------------------- building
+
+
+def build_scene(spec: dict, *, seed: int = 0) -> Scene:
+    """Build meshes and truth from a scene spec.
+
+    ``seed`` drives what the spec leaves open (paints not given, tree and car shapes).
+    """
+    if not isinstance(spec, dict):
+        raise SceneSpecError("a scene spec is a mapping with road, vehicle, guardrails, objects")
+    rng = np.random.default_rng(seed)
+    road = Road(_road_spec(spec.get("road")))
+    vehicle, span = _vehicle(spec.get("vehicle") or {}, road)
+    builder = MeshBuilder()
+    road.build_mesh(builder)
+    objects: list[dict] = []
+    next_id = 1
+    for i, item in enumerate(spec.get("guardrails") or []):
+        where = f"guardrails[{i}]"
+        if not isinstance(item, dict):
+            raise SceneSpecError(f"{where}: expected a mapping")
+        design = load_design(_get(item, "design", str, where))
+        side = _side(item, where)
+        start = _get(item, "start", float, where)
+        length = _get(item, "length", float, where)
+        spacing = _get(item, "pole_spacing", float, where, design.unit_length)
+        offset = _get(item, "offset", float, where, 0.35)
+        if spacing <= 0.3 or length < spacing:
+            raise SceneSpecError(f"{where}: length {length} m must hold at least one pole spacing {spacing} m")
+        if start < 0 or start + length > road.length:
+            raise SceneSpecError(f"{where}: {start}..{start + length} m runs off the road (0..{road.length:.1f} m)")
+        poles, toward_road = _poles_along(road, side, offset, start, length, spacing)
+        record = build_guardrail_run(
+            design, poles, toward_road, paint=_paint(item, where, rng), object_id=next_id, builder=builder
+        )
+        record.update({"side": side, "offset": offset, "start": start, "pole_spacing": spacing})
+        objects.append(record)
+        next_id += 1
+    for i, item in enumerate(spec.get("objects") or []):
+        where = f"objects[{i}]"
+        if not isinstance(item, dict):
+            raise SceneSpecError(f"{where}: expected a mapping")
+        kind = _get(item, "kind", str, where)
+        if kind not in CONFOUNDER_KINDS:
+            raise SceneSpecError(f"{where}.kind: unknown kind {kind!r} (known: {', '.join(CONFOUNDER_KINDS)})")
+        side = _side(item, where)
+        offset = _get(item, "offset", float, where, 1.0)
+        at = item.get("at")
+        positions = at if isinstance(at, list) else [at]
+        for j, s in enumerate(positions):
+            if isinstance(s, bool) or not isinstance(s, int | float) or not 0 <= s <= road.length:
+                raise SceneSpecError(f"{where}.at: {s!r} is not a position on the road (0..{road.length:.1f} m)")
+            lateral = road.lateral_of(side, offset)
+            base = road.point(np.array([s]), np.array([lateral]))[0]
+            _, tangent, left = road.frame(np.array([s]))
+            record = build_confounder(
+                kind,
+                base=base,
+                along=tangent[0],
+                toward_road=-SIDES[side] * left[0],
+                length=float(item.get("length", 0.0)),
+                paint=_paint(item, where, rng),
+                object_id=next_id,
+                builder=builder,
+                rng=rng,
+            )
+            record.update({"side": side, "offset": offset, "at": float(s), "index": j})
+            objects.append(record)
+            next_id += 1
+    origin = np.asarray(spec.get("origin", DEFAULT_ORIGIN), np.float64)
+    if origin.shape != (3,) or not np.all(np.isfinite(origin)):
+        raise SceneSpecError(f"origin: expected three finite map coordinates, got {spec.get('origin')}")
+    return Scene(
+        spec=spec,
+        road=road,
+        vehicle=vehicle,
+        drive_span=span,
+        mesh=builder.build(),
+        objects=objects,
+        crs=str(spec.get("crs", DEFAULT_CRS)),
+        origin=origin,
+    )
+
+
+def _poles_along(
+    road: Road, side: str, offset: float, start: float, length: float, spacing: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Pole ground points (P, 3) every ``spacing`` metres along the offset line, and toward-road units."""
+    lateral = road.lateral_of(side, offset)
+    s = np.arange(start, min(start + length * 1.3 + 1.0, road.length), 0.02)
+    line = road.point(s, np.full_like(s, lateral))
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(line[:, :2], axis=0), axis=1))])
+    n_units = int(np.floor(min(length, arc[-1]) / spacing + 1e-9))
+    at = np.arange(n_units + 1) * spacing
+    s_poles = np.interp(at, arc, s)
+    poles = road.point(s_poles, np.full_like(s_poles, lateral))
+    _, _, left = road.frame(s_poles)
+    return poles, -SIDES[side] * left
+
+
+# ----------------------------------------------------------------------------- random scenes
+
+#: Where along the cross-section each kind stands: (offset from the road edge, zone).
+_PLACEMENT = {
+    "bollard": "curb",
+    "sign_pole": "curb",
+    "utility_pole": "curb",
+    "pedestrian": "walk",
+    "bicycle_rack": "walk",
+    "tree": "walk",
+    "mesh_fence": "verge",
+    "bar_fence": "verge",
+    "low_wall": "verge",
+    "facade": "far",
+    "parked_car": "road",
+}
+_EXTENT = {"mesh_fence": (8, 20), "bar_fence": (6, 16), "low_wall": (6, 18), "facade": (10, 25), "bicycle_rack": (3, 6)}
+
+
+def random_scene_spec(seed: int, length: float) -> dict:
+    """A random street ``length`` metres long (plus run-in and run-out) mixing every design and kind.
+
+    Guardrail runs take turns through all shipped designs; confounders take turns through all
+    kinds, so a drive of ~150 m or more holds each of them at least once.
+    """
+    if length < 20:
+        raise SceneSpecError(f"--length: a drive needs at least 20 m, got {length} m")
+    rng = np.random.default_rng(seed)
+    margin = 25.0
+    total = length + 2 * margin
+    centreline: list[dict] = []
+    done = 0.0
+    while done < total:
+        piece = float(min(rng.uniform(25, 70), total - done))
+        if rng.random() < 0.45 and piece > 15:
+            radius = float(rng.uniform(90, 400))
+            angle = float(np.rad2deg(piece / radius) * rng.choice([-1, 1]))
+            centreline.append({"arc": {"radius": round(radius, 1), "angle_deg": round(angle, 3)}})
+            piece = abs(np.deg2rad(round(angle, 3))) * round(radius, 1)
+        else:
+            centreline.append({"straight": round(piece, 2)})
+        done += piece
+    lanes = int(rng.choice([1, 2, 2, 2, 3]))
+    sidewalk = {"left": round(float(rng.uniform(2.0, 4.0)), 2), "right": round(float(rng.uniform(2.0, 4.0)), 2)}
+    road = {
+        "heading_deg": round(float(rng.uniform(-180, 180)), 2),
+        "centreline": centreline,
+        "lanes": lanes,
+        "lane_width": round(float(rng.uniform(2.9, 3.5)), 2),
+        "grade_percent": round(float(rng.uniform(-3, 3)), 2),
+        "sidewalk": sidewalk,
+        "verge": 6.0,
+    }
+    vehicle_lane = int(rng.integers(0, lanes))
+    v_lo = float(rng.uniform(5.0, 10.0))
+    vehicle = {"lane": vehicle_lane, "speed_mps": [round(v_lo, 2), round(min(15.0, v_lo + rng.uniform(1, 5)), 2)], "start": margin, "end": margin + length}
+
+    designs = list(rng.permutation(list_designs()))
+    kinds = list(rng.permutation(CONFOUNDER_KINDS))
+    guardrails: list[dict] = []
+    objects: list[dict] = []
+    # Parked cars stand in the outer lane of a side the vehicle does not drive in.
+    car_sides = [] if lanes == 1 else [
+        side
+        for side in SIDES
+        if not (side == "left" and vehicle_lane == 0) and not (side == "right" and vehicle_lane == lanes - 1)
+    ]
+    for side in SIDES:
+        walk = sidewalk[side]
+        s = float(rng.uniform(0, 10))
+        while s < total - 8:
+            design = load_design(designs.pop(0) if designs else str(rng.choice(list_designs())))
+            spacing = design.unit_length
+            units = int(rng.integers(3, 13 if spacing < 3 else 7))
+            run = units * spacing
+            if s + run > total - 2:
+                units = int((total - 2 - s) // spacing)
+                run = units * spacing
+            if units >= 2:
+                guardrails.append(
+                    {
+                        "design": design.name,
+                        "side": side,
+                        "offset": round(float(rng.uniform(0.3, 0.5)), 3),
+                        "start": round(s, 3),
+                        "length": round(run, 3),
+                        "pole_spacing": spacing,
+                        "paint": str(rng.choice(list(PAINTS))),
+                    }
+                )
+            gap_start = s + run + 1.0
+            gap = float(rng.uniform(6, 18))
+            # Curb-side objects stand in the gaps between runs; others anywhere along the side.
+            for zone_kind in ("curb", "road"):
+                at = gap_start + rng.uniform(0.5, max(1.0, gap - 2.5))
+                pool = [k for k in kinds if _PLACEMENT[k] == zone_kind] or [
+                    k for k in CONFOUNDER_KINDS if _PLACEMENT[k] == zone_kind
+                ]
+                kind = pool[0]
+                if kind in kinds:
+                    kinds.remove(kind)
+                if kind == "parked_car" and side not in car_sides:
+                    continue
+                if at < total - 3:
+                    objects.append(_object(kind, side, at, walk, rng))
+            s = gap_start + gap
+        # Behind the curb line: walkers, trees and racks on the sidewalk, fences and walls on the
+        # verge, facades at the back, each zone filled independently along the whole side.
+        for zone in ("walk", "verge", "far"):
+            at = float(rng.uniform(2, 12))
+            while at < total - 5:
+                pool = [k for k in kinds if _PLACEMENT[k] == zone] or [k for k in CONFOUNDER_KINDS if _PLACEMENT[k] == zone]
+                kind = pool[0]
+                if kind in kinds:
+                    kinds.remove(kind)
+                item = _object(kind, side, at, walk, rng)
+                extent = float(item.get("length", 1.5))
+                if at + extent < total - 1:
+                    objects.append(item)
+                at += extent + float(rng.uniform(3, 15 if zone != "far" else 6))
+    return {
+        "name": f"random-{seed}",
+        "crs": DEFAULT_CRS,
+        "origin": list(DEFAULT_ORIGIN),
+        "road": road,
+        "vehicle": vehicle,
+        "guardrails": guardrails,
+        "objects": objects,
+    }
+
+
+def _object(kind: str, side: str, at: float, walk: float, rng: np.random.Generator) -> dict:
+    zone = _PLACEMENT[kind]
+    curb_width = 0.18
+    offset = {
+        "curb": float(rng.uniform(0.35, 0.6)),
+        "road": -1.05,
+        "walk": float(rng.uniform(curb_width + 0.9, max(curb_width + 1.0, walk - 0.6))),
+        "verge": walk + curb_width + float(rng.uniform(0.3, 1.5)),
+        "far": walk + curb_width + float(rng.uniform(3.0, 5.5)),
+    }[zone]
+    item: dict = {"kind": kind, "side": side, "offset": round(offset, 3), "at": round(float(at), 3)}
+    if kind in _EXTENT:
+        lo, hi = _EXTENT[kind]
+        item["length"] = round(float(rng.uniform(lo, hi)), 2)
+    if kind in {"mesh_fence", "bar_fence", "bicycle_rack", "bollard", "utility_pole", "sign_pole"}:
+        item["paint"] = str(rng.choice(list(PAINTS)))
+    return item
+
+
+def dump_spec(spec: dict) -> str:
+    """A spec as YAML text (to save what a random scene was)."""
+    return yaml.safe_dump(spec, sort_keys=False)

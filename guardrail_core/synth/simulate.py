@@ -1,0 +1,187 @@
+"""Simulate a whole drive: scene, vehicle motion, scanner, cameras, truth, written as a drive folder."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+import yaml
+from tqdm import tqdm
+
+from guardrail_core.camera_model import Camera
+from guardrail_core.drive import (
+    ImageRecord,
+    PointCloud,
+    Truth,
+    atomic_folder,
+    commit_folder,
+    write_drive_files,
+)
+from guardrail_core.errors import GuardrailError
+from guardrail_core.scanner_model import ScannerParams
+from guardrail_core.synth.camera_render import random_lighting, render_image
+from guardrail_core.synth.camera_rig import default_camera_rig
+from guardrail_core.synth.raycast import SceneRaycaster
+from guardrail_core.synth.scanner import scan
+from guardrail_core.synth.scene import Scene, build_scene
+from guardrail_core.synth.vehicle import drive_along
+
+SIMULATOR_VERSION = "1"
+
+
+@dataclass(frozen=True)
+class SimulationOptions:
+    """What the simulated vehicle records besides the scene.
+
+    Attributes
+    ----------
+    image_every_m : float, metres driven between camera shots (all cameras fire together)
+    image_size : (width, height) pixels of every camera
+    jpeg_quality : int, 0-100
+    scanner : ScannerParams, the scanner (its ``t0`` is set to the drive's first GPS time)
+    compress : bool, LAZ (True) or LAS (False)
+    """
+
+    image_every_m: float = 5.0
+    image_size: tuple[int, int] = (1024, 768)
+    jpeg_quality: int = 92
+    scanner: ScannerParams = dataclasses.field(default_factory=ScannerParams)
+    compress: bool = True
+
+
+@dataclass(frozen=True)
+class SimulationSummary:
+    """What a simulation wrote, and how long each stage took (seconds)."""
+
+    out: Path
+    n_points: int
+    n_images: int
+    length_m: float
+    duration_s: float
+    seconds: dict[str, float]
+
+
+def simulate_drive(
+    spec: dict,
+    out: str | os.PathLike,
+    *,
+    seed: int = 0,
+    options: SimulationOptions = SimulationOptions(),
+    overwrite: bool = False,
+    progress: bool = True,
+) -> SimulationSummary:
+    """Simulate a drive through the scene of ``spec`` and write it to the folder ``out``.
+
+    The same spec, seed and options give the same drive, byte for byte in points and truth.
+    The folder is written beside ``out`` and renamed at the end: an error leaves nothing behind.
+    """
+    out = Path(out)
+    seconds: dict[str, float] = {}
+    clock = time.perf_counter()
+    scene_seq, motion_seq, scan_seq, camera_seq = np.random.SeedSequence(seed).spawn(4)
+    staging_dir = atomic_folder(out, overwrite=overwrite)
+    with staging_dir as staging_name:
+        staging = Path(staging_name)
+        scene = build_scene(spec, seed=int(scene_seq.generate_state(1)[0]))
+        seconds["scene"] = time.perf_counter() - clock
+
+        clock = time.perf_counter()
+        t0 = 345_600.0 + 60.0 * (seed % 1000)  # GPS seconds of the week: Thursday, after 00:00
+        trajectory = drive_along(
+            scene.road, scene.vehicle, s_start=scene.drive_span[0], s_end=scene.drive_span[1], t0=t0,
+            rng=np.random.default_rng(motion_seq),
+        )
+        scanner = dataclasses.replace(options.scanner, t0=float(trajectory.time[0]))
+        raycaster = SceneRaycaster(scene.mesh)
+        n_rot = int((trajectory.time[-1] - trajectory.time[0]) * scanner.rotations_per_second)
+        with tqdm(total=n_rot, desc="scanning", unit="rot", disable=not progress, leave=False) as bar:
+            result = scan(raycaster, trajectory, scanner, np.random.default_rng(scan_seq), progress=bar.update)
+        points = PointCloud(result.xyz, result.gps_time, result.intensity, result.rotation, result.phase)
+        seconds["scanner"] = time.perf_counter() - clock
+
+        clock = time.perf_counter()
+        cameras = default_camera_rig(width=options.image_size[0], height=options.image_size[1])
+        images = _shoot(scene, raycaster, trajectory, cameras, options, staging, np.random.default_rng(camera_seq), progress)
+        seconds["cameras"] = time.perf_counter() - clock
+
+        clock = time.perf_counter()
+        truth = Truth(
+            point_class=scene.mesh.face_class[result.face],
+            point_object=scene.mesh.face_object[result.face],
+            objects=scene.objects,
+            mask_files={},
+        )
+        source = {
+            "simulator": SIMULATOR_VERSION,
+            "seed": seed,
+            "scene": scene.spec.get("name", "scene"),
+            "image_every_m": options.image_every_m,
+        }
+        write_drive_files(
+            staging,
+            crs=scene.crs,
+            origin=scene.origin,
+            scanner=scanner,
+            trajectory=trajectory,
+            points=points,
+            cameras=cameras,
+            images=images,
+            truth=truth,
+            source=source,
+            compress=options.compress,
+        )
+        (staging / "truth" / "scene.yaml").write_text(yaml.safe_dump(scene.spec, sort_keys=False))
+        seconds["write"] = time.perf_counter() - clock
+        commit_folder(staging, out)
+    length = float(np.sum(np.linalg.norm(np.diff(trajectory.position, axis=0), axis=1)))
+    return SimulationSummary(
+        out=out,
+        n_points=len(points),
+        n_images=len(images),
+        length_m=length,
+        duration_s=float(trajectory.time[-1] - trajectory.time[0]),
+        seconds=seconds,
+    )
+
+
+def _shoot(
+    scene: Scene,
+    raycaster: SceneRaycaster,
+    trajectory,
+    cameras: list[Camera],
+    options: SimulationOptions,
+    folder: Path,
+    rng: np.random.Generator,
+    progress: bool,
+) -> list[ImageRecord]:
+    """Fire every camera each ``image_every_m`` metres; write images and truth masks."""
+    if options.image_every_m <= 0:
+        raise GuardrailError(f"image spacing must be positive, got {options.image_every_m} m")
+    travelled = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(trajectory.position, axis=0), axis=1))])
+    marks = np.arange(options.image_every_m / 2, travelled[-1], options.image_every_m)
+    shot_times = np.interp(marks, travelled, trajectory.time)
+    lighting = random_lighting(rng)  # one sun for the whole drive; exposure varies per shot
+    rays = {camera.name: camera.pixel_rays() for camera in cameras}
+    records = []
+    with tqdm(total=len(shot_times) * len(cameras), desc="cameras", unit="img", disable=not progress, leave=False) as bar:
+        for n, t in enumerate(shot_times):
+            T_world_vehicle = trajectory.T_world_vehicle(float(t))
+            for camera in cameras:
+                T_world_camera = T_world_vehicle @ camera.T_vehicle_camera
+                shot_light = dataclasses.replace(lighting, exposure=lighting.exposure * float(rng.uniform(0.85, 1.15)))
+                image, mask = render_image(raycaster, camera, T_world_camera, shot_light, rng, pixel_rays=rays[camera.name])
+                name = f"{n:06d}"
+                image_file = Path("images") / camera.name / f"{name}.jpg"
+                mask_file = Path("truth") / "masks" / camera.name / f"{name}.png"
+                (folder / image_file).parent.mkdir(parents=True, exist_ok=True)
+                (folder / mask_file).parent.mkdir(parents=True, exist_ok=True)
+                cv2.imwrite(str(folder / image_file), image[:, :, ::-1], [cv2.IMWRITE_JPEG_QUALITY, options.jpeg_quality])
+                cv2.imwrite(str(folder / mask_file), mask)
+                records.append(ImageRecord(str(image_file), camera.name, float(t), T_world_camera))
+                bar.update()
+    return records
