@@ -11,6 +11,7 @@ Weng, Cohen & Herniou 1992 (the model the paper cites, Matsumoto et al. 2019, §
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -86,19 +87,32 @@ class Camera:
         d /= np.linalg.norm(d, axis=1, keepdims=True)
         return d.reshape(self.height, self.width, 3)
 
+    @cached_property
+    def max_normalised_radius(self) -> float:
+        """Largest undistorted normalised radius that reaches the sensor (its corners), +5%.
+
+        The distortion polynomial folds back beyond the lens's field of view: without this
+        bound, points far outside the view would project onto the image.
+        """
+        w, h = self.width - 0.5, self.height - 0.5
+        corners = np.array([[-0.5, -0.5], [w, -0.5], [-0.5, h], [w, h]])
+        return 1.05 * float(np.linalg.norm(self.undistort(corners), axis=1).max())
+
     def project(self, points_world: np.ndarray, T_world_camera: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Project world points (N, 3) into the image.
 
         Returns
         -------
-        uv : (N, 2) float64, pixel coordinates (meaningless where ``in_front`` is False)
-        in_front : (N,) bool, the point lies in front of the camera (z > 0.1 m)
+        uv : (N, 2) float64, pixel coordinates (meaningless where ``valid`` is False)
+        valid : (N,) bool, the point lies in front of the camera (z > 0.1 m) and within the
+            lens's field of view; combine with :meth:`inside` for points on the sensor
         """
         pts_cam = transform_points(invert_transform(T_world_camera), np.asarray(points_world, np.float64))
         z = pts_cam[:, 2]
         in_front = z > 0.1
         xy = pts_cam[:, :2] / np.where(in_front, z, 1.0)[:, None]
-        return self.distort(xy), in_front
+        valid = in_front & (np.linalg.norm(xy, axis=1) <= self.max_normalised_radius)
+        return self.distort(xy), valid
 
     def inside(self, uv: np.ndarray) -> np.ndarray:
         """Whether pixel coordinates (N, 2) fall on the sensor (N,) bool."""

@@ -187,7 +187,7 @@ class _Ctx:
         self.source = source
 
     def error(self, key: str, problem: str) -> SceneSpecError:
-        return SceneSpecError(f"{self.source}: {key}: {problem}")
+        return SceneSpecError(f"{self.source}: {key or '(top level)'}: {problem}")
 
     def mapping(self, value: Any, key: str, allowed: set[str], required: set[str]) -> dict:
         if not isinstance(value, dict):

@@ -22,7 +22,7 @@ from guardrail_core.drive import (
     commit_folder,
     write_drive_files,
 )
-from guardrail_core.errors import GuardrailError
+from guardrail_core.errors import GuardrailError, MissingDriveFileError
 from guardrail_core.scanner_model import ScannerParams
 from guardrail_core.synth.camera_render import random_lighting, render_image
 from guardrail_core.synth.camera_rig import default_camera_rig
@@ -87,7 +87,7 @@ def simulate_drive(
     staging_dir = atomic_folder(out, overwrite=overwrite)
     with staging_dir as staging_name:
         staging = Path(staging_name)
-        scene = build_scene(spec, seed=int(scene_seq.generate_state(1)[0]))
+        scene = build_scene(spec, seed=_scene_seed(scene_seq))
         seconds["scene"] = time.perf_counter() - clock
 
         clock = time.perf_counter()
@@ -147,6 +147,19 @@ def simulate_drive(
         duration_s=float(trajectory.time[-1] - trajectory.time[0]),
         seconds=seconds,
     )
+
+
+def _scene_seed(sequence: np.random.SeedSequence) -> int:
+    return int(sequence.generate_state(1)[0])
+
+
+def rebuild_scene(drive: Drive) -> Scene:
+    """The scene a synthetic drive was simulated from: the same meshes and truth."""
+    path = drive.root / "truth" / "scene.yaml"
+    if not path.is_file() or "seed" not in drive.source:
+        raise MissingDriveFileError(f"{drive.root}: not a simulated drive (no truth/scene.yaml or seed)")
+    scene_seq = np.random.SeedSequence(int(drive.source["seed"])).spawn(4)[0]
+    return build_scene(yaml.safe_load(path.read_text()), seed=_scene_seed(scene_seq))
 
 
 def _shoot(
