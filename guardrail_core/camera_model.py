@@ -98,7 +98,9 @@ class Camera:
         corners = np.array([[-0.5, -0.5], [w, -0.5], [-0.5, h], [w, h]])
         return 1.05 * float(np.linalg.norm(self.undistort(corners), axis=1).max())
 
-    def project(self, points_world: np.ndarray, T_world_camera: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def project(
+        self, points_world: np.ndarray, T_world_camera: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Project world points (N, 3) into the image.
 
         Returns
@@ -107,7 +109,9 @@ class Camera:
         valid : (N,) bool, the point lies in front of the camera (z > 0.1 m) and within the
             lens's field of view; combine with :meth:`inside` for points on the sensor
         """
-        pts_cam = transform_points(invert_transform(T_world_camera), np.asarray(points_world, np.float64))
+        pts_cam = transform_points(
+            invert_transform(T_world_camera), np.asarray(points_world, np.float64)
+        )
         z = pts_cam[:, 2]
         in_front = z > 0.1
         xy = pts_cam[:, :2] / np.where(in_front, z, 1.0)[:, None]
@@ -116,4 +120,9 @@ class Camera:
 
     def inside(self, uv: np.ndarray) -> np.ndarray:
         """Whether pixel coordinates (N, 2) fall on the sensor (N,) bool."""
-        return (uv[:, 0] >= -0.5) & (uv[:, 0] < self.width - 0.5) & (uv[:, 1] >= -0.5) & (uv[:, 1] < self.height - 0.5)
+        return (
+            (uv[:, 0] >= -0.5)
+            & (uv[:, 0] < self.width - 0.5)
+            & (uv[:, 1] >= -0.5)
+            & (uv[:, 1] < self.height - 0.5)
+        )

@@ -181,11 +181,15 @@ def read_trajectory_csv(path: Path, origin: np.ndarray, reference_height_m: floa
             )
         rows = list(reader)
     try:
-        data = np.array([[float(v) for v in row] for row in rows], np.float64).reshape(-1, len(rows[0]) if rows else 7)
+        data = np.array([[float(v) for v in row] for row in rows], np.float64).reshape(
+            -1, len(rows[0]) if rows else 7
+        )
     except ValueError as exc:
         raise DriveFormatError(f"{path}: a value is not a number ({exc})") from exc
     if data.ndim != 2 or data.shape[1] != 7 or data.shape[0] < 2:
-        raise DriveDimensionError(f"{path}: expected at least 2 rows of 7 columns, got shape {data.shape}")
+        raise DriveDimensionError(
+            f"{path}: expected at least 2 rows of 7 columns, got shape {data.shape}"
+        )
     if not np.all(np.isfinite(data)):
         bad = np.flatnonzero(~np.isfinite(data).all(axis=1))
         raise NonFiniteCoordinatesError(f"{path}: rows {bad[:5].tolist()} contain NaN or infinity")
@@ -209,7 +213,9 @@ def _camera_from_json(item: dict, where: str) -> Camera:
             height=height,
             K=_matrix(item["K"], (3, 3), f"{where}: {name}.K"),
             dist=_matrix(item["dist"], (5,), f"{where}: {name}.dist"),
-            T_vehicle_camera=_matrix(item["T_vehicle_camera"], (4, 4), f"{where}: {name}.T_vehicle_camera"),
+            T_vehicle_camera=_matrix(
+                item["T_vehicle_camera"], (4, 4), f"{where}: {name}.T_vehicle_camera"
+            ),
         )
     except KeyError as exc:
         raise DriveFormatError(f"{where}: a camera lacks the key {exc.args[0]!r}") from exc
@@ -257,7 +263,9 @@ def load_drive(root: str | os.PathLike, *, with_truth: bool = True) -> Drive:
     camera_list = _read_json(root / files["cameras"], "camera calibration")
     if not isinstance(camera_list, list):
         raise DriveFormatError(f"{root / files['cameras']}: expected a list of cameras")
-    cameras = {c.name: c for c in (_camera_from_json(item, files["cameras"]) for item in camera_list)}
+    cameras = {
+        c.name: c for c in (_camera_from_json(item, files["cameras"]) for item in camera_list)
+    }
     images = _load_images(root, files["images"], cameras, origin, (t_lo, t_hi))
 
     truth = None
@@ -329,11 +337,15 @@ def _load_truth(folder: Path, n_points: int, images: list[ImageRecord]) -> Truth
             f"object ids for {n_points} points"
         )
     objects = _read_json(folder / "objects.json", "truth geometry")
+    if not isinstance(objects, list):
+        raise DriveFormatError(f"{folder / 'objects.json'}: expected a list of objects")
     mask_files = {}
     for record in images:
         mask = Path("truth") / "masks" / Path(record.file).relative_to("images").with_suffix(".png")
         mask_files[record.file] = str(mask)
-    return Truth(point_class.astype(np.uint8), point_object.astype(np.int32), list(objects), mask_files)
+    return Truth(
+        point_class.astype(np.uint8), point_object.astype(np.int32), list(objects), mask_files
+    )
 
 
 # ----------------------------------------------------------------------------------- saving
@@ -356,14 +368,21 @@ def write_trajectory_csv(path: Path, trajectory: Trajectory, origin: np.ndarray)
     data = np.column_stack([trajectory.time, world, trajectory.attitude])
     with path.open("w", newline="") as handle:
         handle.write(",".join(TRAJECTORY_COLUMNS) + "\n")
-        np.savetxt(handle, data, delimiter=",", fmt=["%.6f", "%.4f", "%.4f", "%.4f", "%.9f", "%.9f", "%.9f"])
+        np.savetxt(
+            handle,
+            data,
+            delimiter=",",
+            fmt=["%.6f", "%.4f", "%.4f", "%.4f", "%.9f", "%.9f", "%.9f"],
+        )
 
 
 def atomic_folder(target: Path, *, overwrite: bool = False) -> tempfile.TemporaryDirectory:
     """A temporary folder beside ``target`` to be renamed onto it with :func:`commit_folder`."""
     target = Path(target)
     if target.exists() and any(target.iterdir()) and not overwrite:
-        raise OutputExistsError(f"{target}: exists and is not empty (use --overwrite to replace it)")
+        raise OutputExistsError(
+            f"{target}: exists and is not empty (use --overwrite to replace it)"
+        )
     target.parent.mkdir(parents=True, exist_ok=True)
     return tempfile.TemporaryDirectory(
         prefix=f".{target.name}.partial-", dir=target.parent, ignore_cleanup_errors=True
@@ -422,16 +441,33 @@ def write_drive_files(
     }
     (folder / "drive.json").write_text(json.dumps(meta, indent=2))
     write_trajectory_csv(folder / "trajectory.csv", trajectory, origin)
-    write_points(folder / points_name, points.xyz, origin, points.gps_time, points.intensity, points.rotation, points.phase)
+    write_points(
+        folder / points_name,
+        points.xyz,
+        origin,
+        points.gps_time,
+        points.intensity,
+        points.rotation,
+        points.phase,
+    )
     (folder / "cameras.json").write_text(json.dumps([camera_to_json(c) for c in cameras], indent=2))
     records = []
     for record in images:
         pose = record.T_world_camera.copy()
         pose[:3, 3] += origin
-        records.append({"file": record.file, "camera": record.camera, "gps_time": record.gps_time, "T_world_camera": pose.tolist()})
+        records.append(
+            {
+                "file": record.file,
+                "camera": record.camera,
+                "gps_time": record.gps_time,
+                "T_world_camera": pose.tolist(),
+            }
+        )
     (folder / "images.json").write_text(json.dumps(records, indent=1))
     if truth is not None:
         (folder / "truth").mkdir(exist_ok=True)
-        np.savez_compressed(folder / "truth" / "points.npz", **{"class": truth.point_class, "object_id": truth.point_object})
+        np.savez_compressed(
+            folder / "truth" / "points.npz",
+            **{"class": truth.point_class, "object_id": truth.point_object},  # type: ignore[arg-type]
+        )
         (folder / "truth" / "objects.json").write_text(json.dumps(truth.objects, indent=1))
-

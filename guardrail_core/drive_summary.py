@@ -25,7 +25,10 @@ def describe_drive(drive: Drive) -> str:
         f"points     {len(points):,} from {drive.scanner.rotations_per_second:g} rotations/s x "
         f"{drive.scanner.points_per_rotation} phases ({drive.scanner.measurements_per_second:,.0f} pulses/s)",
         f"images     {len(drive.images)}: "
-        + ", ".join(f"{name} {n} ({drive.cameras[name].width}x{drive.cameras[name].height})" for name, n in per_camera.items()),
+        + ", ".join(
+            f"{name} {n} ({drive.cameras[name].width}x{drive.cameras[name].height})"
+            for name, n in per_camera.items()
+        ),
     ]
     if drive.truth is not None:
         truth = drive.truth
@@ -36,7 +39,9 @@ def describe_drive(drive: Drive) -> str:
             f"truth      {len(runs)} guardrail runs ({', '.join(sorted({r['design'] for r in runs}))}), "
             f"{on_rails:,} guardrail points ({100 * on_rails / max(len(points), 1):.1f}%)"
         )
-        lines.append("           others: " + ", ".join(f"{k} {n}" for k, n in sorted(others.items())))
+        lines.append(
+            "           others: " + ", ".join(f"{k} {n}" for k, n in sorted(others.items()))
+        )
         counts = np.bincount(truth.point_class, minlength=len(TruthClass))
         lines.append(
             "           points by class: "

@@ -12,9 +12,12 @@ Conventions (also in ``docs/drive-format.md``):
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 
 
-def rotation_from_euler(roll: np.ndarray, pitch: np.ndarray, yaw: np.ndarray) -> np.ndarray:
+def rotation_from_euler(
+    roll: npt.ArrayLike, pitch: npt.ArrayLike, yaw: npt.ArrayLike
+) -> np.ndarray:
     """``Rz(yaw) @ Ry(pitch) @ Rx(roll)`` for arrays of angles (radians).
 
     Returns ``(..., 3, 3)`` float64, the broadcast shape of the inputs followed by (3, 3).
@@ -47,7 +50,7 @@ def euler_from_rotation(r: np.ndarray) -> np.ndarray:
     return np.stack([roll, pitch, yaw], axis=-1)
 
 
-def make_transform(rotation: np.ndarray, translation: np.ndarray) -> np.ndarray:
+def make_transform(rotation: npt.ArrayLike, translation: npt.ArrayLike) -> np.ndarray:
     """A 4x4 transform from a rotation (3, 3) and a translation (3,)."""
     t = np.eye(4)
     t[:3, :3] = rotation

@@ -67,7 +67,9 @@ class ScannerParams:
 
     def measurement_index(self, gps_time: np.ndarray) -> np.ndarray:
         """Measurement number k (N,) int64 of each GPS time (N,) seconds."""
-        return np.rint((np.asarray(gps_time, np.float64) - self.t0) * self.measurements_per_second).astype(np.int64)
+        return np.rint(
+            (np.asarray(gps_time, np.float64) - self.t0) * self.measurements_per_second
+        ).astype(np.int64)
 
     def lattice_from_gps_time(self, gps_time: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The scan lattice of points from their GPS times (§3.1).
@@ -115,4 +117,6 @@ class ScannerParams:
         except KeyError as exc:
             raise DriveFormatError(f"drive.json: scanner lacks the key {exc.args[0]!r}") from exc
         except (TypeError, ValueError) as exc:
-            raise DriveFormatError(f"drive.json: scanner has a value of the wrong type: {exc}") from exc
+            raise DriveFormatError(
+                f"drive.json: scanner has a value of the wrong type: {exc}"
+            ) from exc

@@ -21,7 +21,9 @@ SMALL_OPTIONS = SimulationOptions(image_every_m=8.0, image_size=(160, 120))
 def drive_path(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A ~32 m drive along ``data_samples/scenes/test_straight.yaml``."""
     out = tmp_path_factory.mktemp("drives") / "test_straight"
-    simulate_drive(load_scene_spec("test_straight"), out, seed=TEST_SEED, options=TEST_OPTIONS, progress=False)
+    simulate_drive(
+        load_scene_spec("test_straight"), out, seed=TEST_SEED, options=TEST_OPTIONS, progress=False
+    )
     return out
 
 

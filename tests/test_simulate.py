@@ -34,10 +34,14 @@ def _pipe_run(drive: Drive) -> dict:
 def _pipe_points(drive: Drive) -> tuple[np.ndarray, np.ndarray, list[dict]]:
     """Pipe points of the pipe run, the distance of each to every pipe surface, and the pipes."""
     run = _pipe_run(drive)
-    on_run = (drive.truth.point_object == run["id"]) & (drive.truth.point_class == TruthClass.GUARDRAIL)
+    on_run = (drive.truth.point_object == run["id"]) & (
+        drive.truth.point_class == TruthClass.GUARDRAIL
+    )
     pts = drive.points.xyz[on_run]
     pipes = run["pipes"]
-    surface = np.stack([_distance_to_polyline(pts, np.asarray(p["axis"])) - p["radius"] for p in pipes], axis=1)
+    surface = np.stack(
+        [_distance_to_polyline(pts, np.asarray(p["axis"])) - p["radius"] for p in pipes], axis=1
+    )
     return pts, surface, pipes
 
 
@@ -62,7 +66,9 @@ def test_lattice_recovered_from_gps_time_equals_the_simulated_one(drive: Drive) 
     spans = np.bincount(rotation - rotation.min(), weights=drive.points.gps_time)
     assert spans.size == rotation.max() - rotation.min() + 1
     np.testing.assert_allclose(
-        drive.scanner.gps_time_of(drive.points.rotation, drive.points.phase), drive.points.gps_time, atol=1e-9
+        drive.scanner.gps_time_of(drive.points.rotation, drive.points.phase),
+        drive.points.gps_time,
+        atol=1e-9,
     )
 
 
@@ -135,18 +141,41 @@ def test_diagonal_pipes_along_the_scan_lines_get_far_fewer_points(drive: Drive) 
 def test_same_seed_same_drive(tmp_path: Path) -> None:
     first, again = tmp_path / "first", tmp_path / "again"
     for out in (first, again):
-        simulate_drive(load_scene_spec("test_straight"), out, seed=TEST_SEED, options=SMALL_OPTIONS, progress=False)
-    for name in ("points.laz", "trajectory.csv", "images.json", "cameras.json", "truth/points.npz", "truth/objects.json", "images/left/000002.jpg", "truth/masks/front/000002.png"):
+        simulate_drive(
+            load_scene_spec("test_straight"),
+            out,
+            seed=TEST_SEED,
+            options=SMALL_OPTIONS,
+            progress=False,
+        )
+    for name in (
+        "points.laz",
+        "trajectory.csv",
+        "images.json",
+        "cameras.json",
+        "truth/points.npz",
+        "truth/objects.json",
+        "images/left/000002.jpg",
+        "truth/masks/front/000002.png",
+    ):
         assert filecmp.cmp(first / name, again / name, shallow=False), name
 
 
 def test_a_different_seed_gives_a_different_drive(drive: Drive, tmp_path: Path) -> None:
     other = tmp_path / "other"
-    simulate_drive(load_scene_spec("test_straight"), other, seed=TEST_SEED + 1, options=SMALL_OPTIONS, progress=False)
+    simulate_drive(
+        load_scene_spec("test_straight"),
+        other,
+        seed=TEST_SEED + 1,
+        options=SMALL_OPTIONS,
+        progress=False,
+    )
     assert len(load_drive(other).points) != len(drive.points)
 
 
-def test_simulation_refuses_to_overwrite_and_leaves_nothing_on_error(drive_path: Path, tmp_path: Path) -> None:
+def test_simulation_refuses_to_overwrite_and_leaves_nothing_on_error(
+    drive_path: Path, tmp_path: Path
+) -> None:
     with pytest.raises(OutputExistsError):
         simulate_drive(load_scene_spec("test_straight"), drive_path, seed=1, progress=False)
     spec = load_scene_spec("test_straight")

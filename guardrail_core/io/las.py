@@ -87,9 +87,13 @@ def read_points(path: Path, origin: np.ndarray) -> dict[str, np.ndarray]:
     xyz -= np.asarray(origin, np.float64)
     gps_time = np.asarray(las.gps_time, np.float64)
     if not np.all(np.isfinite(xyz)):
-        raise NonFiniteCoordinatesError(f"{path}: {int((~np.isfinite(xyz)).any(axis=1).sum())} points have non-finite coordinates")
+        raise NonFiniteCoordinatesError(
+            f"{path}: {int((~np.isfinite(xyz)).any(axis=1).sum())} points have non-finite coordinates"
+        )
     if not np.all(np.isfinite(gps_time)):
-        raise NonFiniteCoordinatesError(f"{path}: {int((~np.isfinite(gps_time)).sum())} points have a non-finite gps_time")
+        raise NonFiniteCoordinatesError(
+            f"{path}: {int((~np.isfinite(gps_time)).sum())} points have a non-finite gps_time"
+        )
     out = {"xyz": xyz, "gps_time": gps_time, "intensity": np.asarray(las.intensity, np.uint16)}
     for name in LATTICE_DIMENSIONS:
         if name in names:

@@ -119,6 +119,11 @@ _SRGB_LUT = np.round(
 # --------------------------------------------------------------------------------------------
 
 
+def _vec3(values) -> Vec3:
+    x, y, z = (float(v) for v in values)
+    return (x, y, z)
+
+
 def random_lighting(rng: np.random.Generator) -> Lighting:
     """Plausible daylight: sun 15-70 degrees high at any azimuth; ~25% of the time overcast."""
     elevation = np.radians(rng.uniform(15.0, 70.0))
@@ -149,13 +154,13 @@ def random_lighting(rng: np.random.Generator) -> Lighting:
     wb = rng.normal(1.0, 0.04, 3)
     wb = np.clip(wb / wb[1], 0.88, 1.12)  # green channel is the reference
     return Lighting(
-        sun_direction=tuple(float(v) for v in sun),
+        sun_direction=_vec3(sun),
         sun_intensity=float(sun_intensity),
         ambient=float(ambient),
-        sky_zenith=tuple(float(v) for v in zenith),
-        sky_horizon=tuple(float(v) for v in horizon),
+        sky_zenith=_vec3(zenith),
+        sky_horizon=_vec3(horizon),
         exposure=float(rng.uniform(0.7, 1.3)),
-        white_balance=tuple(float(v) for v in wb),
+        white_balance=_vec3(wb),
         haze_distance_m=float(haze),
         sun_colour=sun_colour,
     )
@@ -340,7 +345,7 @@ def render_image(
     gain = np.float32(lighting.exposure) * np.asarray(lighting.white_balance, np.float32)
     img *= vignette[:, :, None] * gain
     if params.optics_blur_sigma_px > 0:
-        img = cv2.GaussianBlur(img, (0, 0), params.optics_blur_sigma_px)
+        img = np.asarray(cv2.GaussianBlur(img, (0, 0), params.optics_blur_sigma_px), np.float32)
     # Sensor: shot noise (variance proportional to signal) plus read noise, before the tone curve.
     signal = np.clip(img, 0.0, 1.0)
     sigma = np.sqrt(signal * np.float32(params.shot_noise_gain) + np.float32(params.read_noise**2))

@@ -43,19 +43,27 @@ PAINTS: dict[str, Material] = {
     "yellow": Material((0.80, 0.62, 0.08), 0.60, specular=0.25, texture=0.03),
     "green": Material((0.10, 0.35, 0.18), 0.35, specular=0.20, texture=0.03),
     "brown": Material((0.28, 0.17, 0.10), 0.30, specular=0.15, texture=0.04),
-    "galvanised": Material((0.55, 0.57, 0.58), 0.55, specular=0.45, texture=0.08, texture_scale_m=0.02),
+    "galvanised": Material(
+        (0.55, 0.57, 0.58), 0.55, specular=0.45, texture=0.08, texture_scale_m=0.02
+    ),
     "rust": Material((0.38, 0.18, 0.09), 0.25, specular=0.05, texture=0.25, texture_scale_m=0.03),
 }
 
 #: Everything else in a street.
 SURFACES: dict[str, Material] = {
-    "asphalt": Material((0.09, 0.09, 0.10), 0.18, specular=0.02, texture=0.35, texture_scale_m=0.03),
+    "asphalt": Material(
+        (0.09, 0.09, 0.10), 0.18, specular=0.02, texture=0.35, texture_scale_m=0.03
+    ),
     "lane_paint": Material((0.85, 0.85, 0.82), 0.80, specular=0.05, texture=0.10),
-    "concrete": Material((0.50, 0.49, 0.46), 0.45, specular=0.02, texture=0.15, texture_scale_m=0.05),
+    "concrete": Material(
+        (0.50, 0.49, 0.46), 0.45, specular=0.02, texture=0.15, texture_scale_m=0.05
+    ),
     "paving": Material((0.42, 0.36, 0.32), 0.40, specular=0.02, texture=0.25, texture_scale_m=0.15),
     "grass": Material((0.12, 0.25, 0.06), 0.40, specular=0.0, texture=0.45, texture_scale_m=0.04),
     "bark": Material((0.20, 0.14, 0.09), 0.30, specular=0.0, texture=0.35, texture_scale_m=0.02),
-    "foliage": Material((0.07, 0.20, 0.05), 0.45, specular=0.0, texture=0.55, texture_scale_m=0.08, dropout=0.35),
+    "foliage": Material(
+        (0.07, 0.20, 0.05), 0.45, specular=0.0, texture=0.55, texture_scale_m=0.08, dropout=0.35
+    ),
     "brick": Material((0.45, 0.20, 0.14), 0.35, specular=0.02, texture=0.25, texture_scale_m=0.07),
     "plaster": Material((0.70, 0.66, 0.58), 0.55, specular=0.02, texture=0.08, texture_scale_m=0.3),
     "glass": Material((0.10, 0.13, 0.16), 0.05, specular=0.9, texture=0.0, dropout=0.7),

@@ -152,7 +152,9 @@ def box(centre: np.ndarray, size: np.ndarray, rotation: np.ndarray | None = None
     return vertices + np.asarray(centre, dtype=np.float64), np.asarray(mesh.faces)
 
 
-def segment_box(p0: np.ndarray, p1: np.ndarray, width: float, depth: float, up=(0.0, 0.0, 1.0)) -> Mesh:
+def segment_box(
+    p0: np.ndarray, p1: np.ndarray, width: float, depth: float, up=(0.0, 0.0, 1.0)
+) -> Mesh:
     """A bar of rectangular section ``width`` x ``depth`` (m) from ``p0`` to ``p1`` (3,)."""
     p0, p1 = np.asarray(p0, np.float64), np.asarray(p1, np.float64)
     axis = p1 - p0

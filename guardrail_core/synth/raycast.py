@@ -42,14 +42,16 @@ class SceneRaycaster:
     def __init__(self, mesh: SceneMesh, *, threads: int = 0) -> None:
         self.mesh = mesh
         self._scene = o3d.t.geometry.RaycastingScene(nthreads=threads)
-        vertices = o3d.core.Tensor(mesh.vertices.astype(np.float32))
-        faces = o3d.core.Tensor(mesh.faces.astype(np.uint32))
+        vertices = o3d.core.Tensor(mesh.vertices.astype(np.float32))  # type: ignore[call-overload]
+        faces = o3d.core.Tensor(mesh.faces.astype(np.uint32))  # type: ignore[call-overload]
         self._scene.add_triangles(vertices, faces)
 
     @staticmethod
     def _rays(origins: np.ndarray, directions: np.ndarray) -> o3d.core.Tensor:
         origins = np.broadcast_to(np.asarray(origins, np.float32), np.shape(directions))
-        return o3d.core.Tensor(np.concatenate([origins, np.asarray(directions, np.float32)], axis=-1))
+        return o3d.core.Tensor(  # type: ignore[call-overload]
+            np.concatenate([origins, np.asarray(directions, np.float32)], axis=-1)
+        )
 
     def cast(self, origins: np.ndarray, directions: np.ndarray) -> Hits:
         """Cast rays from ``origins`` (N, 3) or (3,) along unit ``directions`` (N, 3)."""
@@ -61,7 +63,9 @@ class SceneRaycaster:
         t[miss] = np.inf
         return Hits(t=t, face=face, normal=result["primitive_normals"].numpy().astype(np.float64))
 
-    def occluded(self, origins: np.ndarray, directions: np.ndarray, t_far: float = np.inf) -> np.ndarray:
+    def occluded(
+        self, origins: np.ndarray, directions: np.ndarray, t_far: float = np.inf
+    ) -> np.ndarray:
         """Whether anything lies on each ray closer than ``t_far`` metres (N,) bool (shadows)."""
         rays = self._rays(origins, directions)
         return self._scene.test_occlusions(rays, tfar=float(t_far)).numpy().astype(bool)

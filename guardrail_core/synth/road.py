@@ -116,7 +116,9 @@ class Road:
         return self.spec.sidewalk_left if side == "left" else self.spec.sidewalk_right
 
     # ------------------------------------------------------------------ meshes
-    def _strip(self, s: np.ndarray, l0: float, l1: float, lift: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    def _strip(
+        self, s: np.ndarray, l0: float, l1: float, lift: float = 0.0
+    ) -> tuple[np.ndarray, np.ndarray]:
         laterals = np.array([l0, l1])
         grid = np.stack([self.point(s, np.full_like(s, lat)) for lat in laterals], axis=1)
         grid[..., 2] += lift
@@ -140,13 +142,20 @@ class Road:
         marked = {pair for pair in solid + dashed}
         for l0, l1 in zip(breaks[:-1], breaks[1:], strict=True):
             if (l0, l1) in marked and (l0, l1) in solid:
-                builder.add(self._strip(s, l0, l1), cls=TruthClass.ROAD_MARKING, object_id=0, material="lane_paint")
+                builder.add(
+                    self._strip(s, l0, l1),
+                    cls=TruthClass.ROAD_MARKING,
+                    object_id=0,
+                    material="lane_paint",
+                )
             elif (l0, l1) in marked:
                 on, off = spec.dash_m
                 phase = np.mod(s, on + off) < on
                 self._add_dashes(builder, s, phase, l0, l1)
             else:
-                builder.add(self._strip(s, l0, l1), cls=TruthClass.ROAD, object_id=0, material="asphalt")
+                builder.add(
+                    self._strip(s, l0, l1), cls=TruthClass.ROAD, object_id=0, material="asphalt"
+                )
         for side, sign in SIDES.items():
             edge = sign * hw
             outer = sign * (hw + spec.curb_width)
@@ -157,11 +166,22 @@ class Road:
             high = self.point(s, np.full_like(s, edge + sign * 1e-4))
             face = np.stack([low, high], axis=1) if sign < 0 else np.stack([high, low], axis=1)
             builder.add(grid_surface(face), cls=TruthClass.CURB, object_id=0, material="concrete")
-            builder.add(self._strip(s, edge + sign * 1e-4, outer), cls=TruthClass.CURB, object_id=0, material="concrete")
-            builder.add(self._strip(s, outer, walk), cls=TruthClass.SIDEWALK, object_id=0, material="paving")
-            builder.add(self._strip(s, walk, verge), cls=TruthClass.TERRAIN, object_id=0, material="grass")
+            builder.add(
+                self._strip(s, edge + sign * 1e-4, outer),
+                cls=TruthClass.CURB,
+                object_id=0,
+                material="concrete",
+            )
+            builder.add(
+                self._strip(s, outer, walk), cls=TruthClass.SIDEWALK, object_id=0, material="paving"
+            )
+            builder.add(
+                self._strip(s, walk, verge), cls=TruthClass.TERRAIN, object_id=0, material="grass"
+            )
 
-    def _add_dashes(self, builder: MeshBuilder, s: np.ndarray, on: np.ndarray, l0: float, l1: float) -> None:
+    def _add_dashes(
+        self, builder: MeshBuilder, s: np.ndarray, on: np.ndarray, l0: float, l1: float
+    ) -> None:
         # Split the rows into runs of painted and bare asphalt.
         edges = np.flatnonzero(np.diff(on.astype(np.int8))) + 1
         for run in np.split(np.arange(len(s)), edges):

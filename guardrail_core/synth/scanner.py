@@ -77,8 +77,12 @@ def scan(
     ``progress`` is called with the number of rotations done after each chunk.
     """
     ppr = scanner.points_per_rotation
-    k_first = int(np.ceil((trajectory.time[0] - scanner.t0) * scanner.measurements_per_second - 1e-6))
-    k_last = int(np.floor((trajectory.time[-1] - scanner.t0) * scanner.measurements_per_second + 1e-6))
+    k_first = int(
+        np.ceil((trajectory.time[0] - scanner.t0) * scanner.measurements_per_second - 1e-6)
+    )
+    k_last = int(
+        np.floor((trajectory.time[-1] - scanner.t0) * scanner.measurements_per_second + 1e-6)
+    )
     r_first, r_last = -(-k_first // ppr), k_last // ppr  # whole rotations only
     mount_r = scanner.T_vehicle_scanner[:3, :3]
     mount_t = scanner.T_vehicle_scanner[:3, 3]
@@ -104,19 +108,32 @@ def scan(
         material = raycaster.mesh.face_material[face]
         range_factor = np.minimum(1.0, (returns.range_knee_m / rng_m) ** 2)
         signal = _REFLECTIVITY[material] * cos_inc * range_factor
-        p_drop = returns.base_dropout + _DROPOUT[material] + np.clip(1 - signal / returns.weak_signal, 0, 1) * 0.9
+        p_drop = (
+            returns.base_dropout
+            + _DROPOUT[material]
+            + np.clip(1 - signal / returns.weak_signal, 0, 1) * 0.9
+        )
         kept = rng.random(len(idx)) >= np.clip(p_drop, 0.0, 1.0)
         idx, face, rng_m, signal = idx[kept], face[kept], rng_m[kept], signal[kept]
         measured = rng_m + rng.normal(0.0, scanner.range_noise_m, len(idx))
         xyz = origin[idx] + direction[idx] * measured[:, None]
         # Intensity: square root compresses the dynamic range the way scanners report it.
-        level = np.sqrt(np.clip(signal, 0, 1)) * (1 + returns.intensity_noise * rng.standard_normal(len(idx)))
+        level = np.sqrt(np.clip(signal, 0, 1)) * (
+            1 + returns.intensity_noise * rng.standard_normal(len(idx))
+        )
         intensity = np.clip(level * 65535, 0, 65535).astype(np.uint16)
         parts.append((xyz, t[idx], intensity, k[idx] // ppr, phase[idx], face))
         if progress is not None:
             progress(r1 - r0)
     if not parts:
         empty = np.zeros(0)
-        return Scan(np.zeros((0, 3)), empty, empty.astype(np.uint16), empty.astype(np.int64), empty.astype(np.int64), empty.astype(np.int64))
+        return Scan(
+            np.zeros((0, 3)),
+            empty,
+            empty.astype(np.uint16),
+            empty.astype(np.int64),
+            empty.astype(np.int64),
+            empty.astype(np.int64),
+        )
     cols = [np.concatenate(c) for c in zip(*parts, strict=True)]
     return Scan(*cols)

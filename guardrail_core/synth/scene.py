@@ -71,7 +71,9 @@ def load_scene_spec(path: str | os.PathLike) -> dict:
     except yaml.YAMLError as exc:
         raise SceneSpecError(f"{p}: not valid YAML ({exc})") from exc
     if not isinstance(spec, dict):
-        raise SceneSpecError(f"{p}: a scene spec is a mapping with road, vehicle, guardrails, objects")
+        raise SceneSpecError(
+            f"{p}: a scene spec is a mapping with road, vehicle, guardrails, objects"
+        )
     spec.setdefault("name", p.stem)
     return spec
 
@@ -92,11 +94,13 @@ def _get(mapping: dict, key: str, kind: type, where: str, default: Any = ...) ->
             raise SceneSpecError(f"{where}.{key}: expected a number, got {value!r}")
         return float(value)
     if not isinstance(value, kind):
-        raise SceneSpecError(f"{where}.{key}: expected {getattr(kind, '__name__', kind)}, got {value!r}")
+        raise SceneSpecError(
+            f"{where}.{key}: expected {getattr(kind, '__name__', kind)}, got {value!r}"
+        )
     return value
 
 
-def _road_spec(data: dict) -> RoadSpec:
+def _road_spec(data: object) -> RoadSpec:
     where = "road"
     if not isinstance(data, dict):
         raise SceneSpecError("road: expected a mapping")
@@ -111,14 +115,18 @@ def _road_spec(data: dict) -> RoadSpec:
             arc = _get(piece, "arc", dict, w)
             radius = _get(arc, "radius", float, w + ".arc")
             if radius < 20:
-                raise SceneSpecError(f"{w}.arc.radius: {radius} m is tighter than any road (>= 20 m)")
+                raise SceneSpecError(
+                    f"{w}.arc.radius: {radius} m is tighter than any road (>= 20 m)"
+                )
             if "angle_deg" in arc:
                 angle = np.deg2rad(_get(arc, "angle_deg", float, w + ".arc"))
             else:
                 angle = _get(arc, "length", float, w + ".arc") / radius
             segments.append(("arc", abs(angle) * radius, float(np.sign(angle) / radius)))
         else:
-            raise SceneSpecError(f"{w}: expected {{straight: LENGTH}} or {{arc: {{radius, angle_deg}}}}")
+            raise SceneSpecError(
+                f"{w}: expected {{straight: LENGTH}} or {{arc: {{radius, angle_deg}}}}"
+            )
         if segments[-1][1] <= 0:
             raise SceneSpecError(f"{w}: length must be positive")
     if not segments:
@@ -148,14 +156,18 @@ def _vehicle(data: dict, road: Road) -> tuple[VehicleParams, tuple[float, float]
     where = "vehicle"
     speed = _get(data, "speed_mps", list, where, [8.0, 12.0])
     if len(speed) != 2 or not 1.0 <= float(speed[0]) <= float(speed[1]) <= 40.0:
-        raise SceneSpecError(f"vehicle.speed_mps: expected [min, max] within 1..40 m/s, got {speed}")
+        raise SceneSpecError(
+            f"vehicle.speed_mps: expected [min, max] within 1..40 m/s, got {speed}"
+        )
     lane = int(_get(data, "lane", int, where, 0))
     if not 0 <= lane < road.spec.lanes:
         raise SceneSpecError(f"vehicle.lane: {lane} is not a lane of a {road.spec.lanes}-lane road")
     start = _get(data, "start", float, where, min(20.0, road.length / 4))
     end = _get(data, "end", float, where, road.length - min(20.0, road.length / 4))
     if not 0 <= start < end <= road.length:
-        raise SceneSpecError(f"vehicle: start {start} and end {end} must lie on the road (0..{road.length:.1f} m)")
+        raise SceneSpecError(
+            f"vehicle: start {start} and end {end} must lie on the road (0..{road.length:.1f} m)"
+        )
     params = VehicleParams(speed_mps=(float(speed[0]), float(speed[1])), lane=lane)
     return params, (start, end)
 
@@ -202,12 +214,21 @@ def build_scene(spec: dict, *, seed: int = 0) -> Scene:
         spacing = _get(item, "pole_spacing", float, where, design.unit_length)
         offset = _get(item, "offset", float, where, 0.35)
         if spacing <= 0.3 or length < spacing:
-            raise SceneSpecError(f"{where}: length {length} m must hold at least one pole spacing {spacing} m")
+            raise SceneSpecError(
+                f"{where}: length {length} m must hold at least one pole spacing {spacing} m"
+            )
         if start < 0 or start + length > road.length:
-            raise SceneSpecError(f"{where}: {start}..{start + length} m runs off the road (0..{road.length:.1f} m)")
+            raise SceneSpecError(
+                f"{where}: {start}..{start + length} m runs off the road (0..{road.length:.1f} m)"
+            )
         poles, toward_road = _poles_along(road, side, offset, start, length, spacing)
         record = build_guardrail_run(
-            design, poles, toward_road, paint=_paint(item, where, rng), object_id=next_id, builder=builder
+            design,
+            poles,
+            toward_road,
+            paint=_paint(item, where, rng),
+            object_id=next_id,
+            builder=builder,
         )
         record.update({"side": side, "offset": offset, "start": start, "pole_spacing": spacing})
         objects.append(record)
@@ -218,14 +239,18 @@ def build_scene(spec: dict, *, seed: int = 0) -> Scene:
             raise SceneSpecError(f"{where}: expected a mapping")
         kind = _get(item, "kind", str, where)
         if kind not in CONFOUNDER_KINDS:
-            raise SceneSpecError(f"{where}.kind: unknown kind {kind!r} (known: {', '.join(CONFOUNDER_KINDS)})")
+            raise SceneSpecError(
+                f"{where}.kind: unknown kind {kind!r} (known: {', '.join(CONFOUNDER_KINDS)})"
+            )
         side = _side(item, where)
         offset = _get(item, "offset", float, where, 1.0)
         at = item.get("at")
         positions = at if isinstance(at, list) else [at]
         for j, s in enumerate(positions):
             if isinstance(s, bool) or not isinstance(s, int | float) or not 0 <= s <= road.length:
-                raise SceneSpecError(f"{where}.at: {s!r} is not a position on the road (0..{road.length:.1f} m)")
+                raise SceneSpecError(
+                    f"{where}.at: {s!r} is not a position on the road (0..{road.length:.1f} m)"
+                )
             lateral = road.lateral_of(side, offset)
             base = road.point(np.array([s]), np.array([lateral]))[0]
             _, tangent, left = road.frame(np.array([s]))
@@ -245,7 +270,9 @@ def build_scene(spec: dict, *, seed: int = 0) -> Scene:
             next_id += 1
     origin = np.asarray(spec.get("origin", DEFAULT_ORIGIN), np.float64)
     if origin.shape != (3,) or not np.all(np.isfinite(origin)):
-        raise SceneSpecError(f"origin: expected three finite map coordinates, got {spec.get('origin')}")
+        raise SceneSpecError(
+            f"origin: expected three finite map coordinates, got {spec.get('origin')}"
+        )
     return Scene(
         spec=spec,
         road=road,
@@ -290,7 +317,13 @@ _PLACEMENT = {
     "facade": "far",
     "parked_car": "road",
 }
-_EXTENT = {"mesh_fence": (8, 20), "bar_fence": (6, 16), "low_wall": (6, 18), "facade": (10, 25), "bicycle_rack": (3, 6)}
+_EXTENT = {
+    "mesh_fence": (8, 20),
+    "bar_fence": (6, 16),
+    "low_wall": (6, 18),
+    "facade": (10, 25),
+    "bicycle_rack": (3, 6),
+}
 
 
 def random_scene_spec(seed: int, length: float) -> dict:
@@ -317,7 +350,10 @@ def random_scene_spec(seed: int, length: float) -> dict:
             centreline.append({"straight": round(piece, 2)})
         done += piece
     lanes = int(rng.choice([1, 2, 2, 2, 3]))
-    sidewalk = {"left": round(float(rng.uniform(2.0, 4.0)), 2), "right": round(float(rng.uniform(2.0, 4.0)), 2)}
+    sidewalk = {
+        "left": round(float(rng.uniform(2.0, 4.0)), 2),
+        "right": round(float(rng.uniform(2.0, 4.0)), 2),
+    }
     road = {
         "heading_deg": round(float(rng.uniform(-180, 180)), 2),
         "centreline": centreline,
@@ -329,18 +365,28 @@ def random_scene_spec(seed: int, length: float) -> dict:
     }
     vehicle_lane = int(rng.integers(0, lanes))
     v_lo = float(rng.uniform(5.0, 10.0))
-    vehicle = {"lane": vehicle_lane, "speed_mps": [round(v_lo, 2), round(min(15.0, v_lo + rng.uniform(1, 5)), 2)], "start": margin, "end": margin + length}
+    vehicle = {
+        "lane": vehicle_lane,
+        "speed_mps": [round(v_lo, 2), round(min(15.0, v_lo + rng.uniform(1, 5)), 2)],
+        "start": margin,
+        "end": margin + length,
+    }
 
-    designs = list(rng.permutation(list_designs()))
-    kinds = list(rng.permutation(CONFOUNDER_KINDS))
+    designs = [str(d) for d in rng.permutation(list_designs())]
+    kinds = [str(k) for k in rng.permutation(CONFOUNDER_KINDS)]
     guardrails: list[dict] = []
     objects: list[dict] = []
     # Parked cars stand in the outer lane of a side the vehicle does not drive in.
-    car_sides = [] if lanes == 1 else [
-        side
-        for side in SIDES
-        if not (side == "left" and vehicle_lane == 0) and not (side == "right" and vehicle_lane == lanes - 1)
-    ]
+    car_sides = (
+        []
+        if lanes == 1
+        else [
+            side
+            for side in SIDES
+            if not (side == "left" and vehicle_lane == 0)
+            and not (side == "right" and vehicle_lane == lanes - 1)
+        ]
+    )
     for side in SIDES:
         walk = sidewalk[side]
         s = float(rng.uniform(0, 10))
@@ -385,7 +431,9 @@ def random_scene_spec(seed: int, length: float) -> dict:
         for zone in ("walk", "verge", "far"):
             at = float(rng.uniform(2, 12))
             while at < total - 5:
-                pool = [k for k in kinds if _PLACEMENT[k] == zone] or [k for k in CONFOUNDER_KINDS if _PLACEMENT[k] == zone]
+                pool = [k for k in kinds if _PLACEMENT[k] == zone] or [
+                    k for k in CONFOUNDER_KINDS if _PLACEMENT[k] == zone
+                ]
                 kind = pool[0]
                 if kind in kinds:
                     kinds.remove(kind)

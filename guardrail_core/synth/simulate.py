@@ -15,6 +15,7 @@ from tqdm import tqdm
 
 from guardrail_core.camera_model import Camera
 from guardrail_core.drive import (
+    Drive,
     ImageRecord,
     PointCloud,
     Truth,
@@ -93,20 +94,39 @@ def simulate_drive(
         clock = time.perf_counter()
         t0 = 345_600.0 + 60.0 * (seed % 1000)  # GPS seconds of the week: Thursday, after 00:00
         trajectory = drive_along(
-            scene.road, scene.vehicle, s_start=scene.drive_span[0], s_end=scene.drive_span[1], t0=t0,
+            scene.road,
+            scene.vehicle,
+            s_start=scene.drive_span[0],
+            s_end=scene.drive_span[1],
+            t0=t0,
             rng=np.random.default_rng(motion_seq),
         )
         scanner = dataclasses.replace(options.scanner, t0=float(trajectory.time[0]))
         raycaster = SceneRaycaster(scene.mesh)
         n_rot = int((trajectory.time[-1] - trajectory.time[0]) * scanner.rotations_per_second)
-        with tqdm(total=n_rot, desc="scanning", unit="rot", disable=not progress, leave=False) as bar:
-            result = scan(raycaster, trajectory, scanner, np.random.default_rng(scan_seq), progress=bar.update)
-        points = PointCloud(result.xyz, result.gps_time, result.intensity, result.rotation, result.phase)
+        with tqdm(
+            total=n_rot, desc="scanning", unit="rot", disable=not progress, leave=False
+        ) as bar:
+            result = scan(
+                raycaster, trajectory, scanner, np.random.default_rng(scan_seq), progress=bar.update
+            )
+        points = PointCloud(
+            result.xyz, result.gps_time, result.intensity, result.rotation, result.phase
+        )
         seconds["scanner"] = time.perf_counter() - clock
 
         clock = time.perf_counter()
         cameras = default_camera_rig(width=options.image_size[0], height=options.image_size[1])
-        images = _shoot(scene, raycaster, trajectory, cameras, options, staging, np.random.default_rng(camera_seq), progress)
+        images = _shoot(
+            scene,
+            raycaster,
+            trajectory,
+            cameras,
+            options,
+            staging,
+            np.random.default_rng(camera_seq),
+            progress,
+        )
         seconds["cameras"] = time.perf_counter() - clock
 
         clock = time.perf_counter()
@@ -157,7 +177,9 @@ def rebuild_scene(drive: Drive) -> Scene:
     """The scene a synthetic drive was simulated from: the same meshes and truth."""
     path = drive.root / "truth" / "scene.yaml"
     if not path.is_file() or "seed" not in drive.source:
-        raise MissingDriveFileError(f"{drive.root}: not a simulated drive (no truth/scene.yaml or seed)")
+        raise MissingDriveFileError(
+            f"{drive.root}: not a simulated drive (no truth/scene.yaml or seed)"
+        )
     scene_seq = np.random.SeedSequence(int(drive.source["seed"])).spawn(4)[0]
     return build_scene(yaml.safe_load(path.read_text()), seed=_scene_seed(scene_seq))
 
@@ -175,25 +197,41 @@ def _shoot(
     """Fire every camera each ``image_every_m`` metres; write images and truth masks."""
     if options.image_every_m <= 0:
         raise GuardrailError(f"image spacing must be positive, got {options.image_every_m} m")
-    travelled = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(trajectory.position, axis=0), axis=1))])
+    travelled = np.concatenate(
+        [[0.0], np.cumsum(np.linalg.norm(np.diff(trajectory.position, axis=0), axis=1))]
+    )
     marks = np.arange(options.image_every_m / 2, travelled[-1], options.image_every_m)
     shot_times = np.interp(marks, travelled, trajectory.time)
     lighting = random_lighting(rng)  # one sun for the whole drive; exposure varies per shot
     rays = {camera.name: camera.pixel_rays() for camera in cameras}
     records = []
-    with tqdm(total=len(shot_times) * len(cameras), desc="cameras", unit="img", disable=not progress, leave=False) as bar:
+    with tqdm(
+        total=len(shot_times) * len(cameras),
+        desc="cameras",
+        unit="img",
+        disable=not progress,
+        leave=False,
+    ) as bar:
         for n, t in enumerate(shot_times):
             T_world_vehicle = trajectory.T_world_vehicle(float(t))
             for camera in cameras:
                 T_world_camera = T_world_vehicle @ camera.T_vehicle_camera
-                shot_light = dataclasses.replace(lighting, exposure=lighting.exposure * float(rng.uniform(0.85, 1.15)))
-                image, mask = render_image(raycaster, camera, T_world_camera, shot_light, rng, pixel_rays=rays[camera.name])
+                shot_light = dataclasses.replace(
+                    lighting, exposure=lighting.exposure * float(rng.uniform(0.85, 1.15))
+                )
+                image, mask = render_image(
+                    raycaster, camera, T_world_camera, shot_light, rng, pixel_rays=rays[camera.name]
+                )
                 name = f"{n:06d}"
                 image_file = Path("images") / camera.name / f"{name}.jpg"
                 mask_file = Path("truth") / "masks" / camera.name / f"{name}.png"
                 (folder / image_file).parent.mkdir(parents=True, exist_ok=True)
                 (folder / mask_file).parent.mkdir(parents=True, exist_ok=True)
-                cv2.imwrite(str(folder / image_file), image[:, :, ::-1], [cv2.IMWRITE_JPEG_QUALITY, options.jpeg_quality])
+                cv2.imwrite(
+                    str(folder / image_file),
+                    image[:, :, ::-1],
+                    [cv2.IMWRITE_JPEG_QUALITY, options.jpeg_quality],
+                )
                 cv2.imwrite(str(folder / mask_file), mask)
                 records.append(ImageRecord(str(image_file), camera.name, float(t), T_world_camera))
                 bar.update()

@@ -38,7 +38,9 @@ def _smooth_noise(n: int, dt: float, period_s: float, rng: np.random.Generator) 
     """Zero-mean noise (n,) of unit standard deviation, smooth over ``period_s`` seconds."""
     width = max(1, int(period_s / dt))
     kernel = np.hanning(2 * width + 1)
-    noise = np.convolve(rng.standard_normal(n + 2 * width), kernel / kernel.sum(), mode="same")[width:-width]
+    noise = np.convolve(rng.standard_normal(n + 2 * width), kernel / kernel.sum(), mode="same")[
+        width:-width
+    ]
     return noise / max(noise.std(), 1e-12)
 
 
@@ -58,7 +60,11 @@ def drive_along(
     t = np.arange(n) * dt
     # Speed: a slow wave between the limits, as in traffic.
     phase = rng.uniform(0, 2 * np.pi, 2)
-    wave = 0.5 + 0.35 * np.sin(2 * np.pi * t / 23.0 + phase[0]) + 0.15 * np.sin(2 * np.pi * t / 7.0 + phase[1])
+    wave = (
+        0.5
+        + 0.35 * np.sin(2 * np.pi * t / 23.0 + phase[0])
+        + 0.15 * np.sin(2 * np.pi * t / 7.0 + phase[1])
+    )
     speed = v_lo + (v_hi - v_lo) * np.clip(wave, 0.0, 1.0)
     s = s_start + np.concatenate([[0.0], np.cumsum(0.5 * (speed[1:] + speed[:-1]) * dt)])
     keep = np.searchsorted(s, s_end) + 1
@@ -82,6 +88,15 @@ def drive_along(
     # Roll from the crown under the wheels and the body leaning out of curves.
     cross = -road.spec.crown_slope * np.sign(lateral)
     curvature = np.gradient(np.unwrap(yaw), s)
-    roll = np.arctan(cross) + params.body_roll_per_mps2 * speed**2 * curvature + vib * _smooth_noise(n, dt, 0.3, rng)
+    roll = (
+        np.arctan(cross)
+        + params.body_roll_per_mps2 * speed**2 * curvature
+        + vib * _smooth_noise(n, dt, 0.3, rng)
+    )
     attitude = np.stack([roll, pitch, np.angle(np.exp(1j * yaw))], axis=1)
-    return Trajectory(time=t0 + t, position=position, attitude=attitude, reference_height_m=params.reference_height_m)
+    return Trajectory(
+        time=t0 + t,
+        position=position,
+        attitude=attitude,
+        reference_height_m=params.reference_height_m,
+    )

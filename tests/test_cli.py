@@ -1,0 +1,71 @@
+"""The ``guardrail`` command: help, simulate, info, and errors without tracebacks."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from guardrail_core.cli import main
+
+
+def test_help_lists_the_commands(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--help"])
+    assert exit_info.value.code == 0
+    out = capsys.readouterr().out
+    for command in ("simulate", "info", "demo"):
+        assert command in out
+
+
+def test_console_script_is_installed() -> None:
+    exe = Path(sys.executable).parent / "guardrail"
+    result = subprocess.run(
+        [str(exe), "simulate", "--help"], capture_output=True, text=True, check=True
+    )
+    assert "--seed" in result.stdout and "--length" in result.stdout and "--scene" in result.stdout
+
+
+def test_simulate_a_random_drive_and_describe_it(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "drive"
+    code = main(
+        [
+            "simulate",
+            str(out),
+            "--seed",
+            "4",
+            "--length",
+            "25",
+            "--image-size",
+            "160x120",
+            "--image-every",
+            "10",
+            "--quiet",
+        ]
+    )
+    assert code == 0
+    text = capsys.readouterr().out
+    assert "points" in text and "guardrail runs" in text and str(out.resolve()) in text
+    assert (out / "drive.json").is_file() and (out / "truth" / "objects.json").is_file()
+    assert main(["info", str(out)]) == 0
+
+
+def test_errors_are_reported_without_a_traceback(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["info", str(tmp_path / "nowhere")]) == 2
+    err = capsys.readouterr().err
+    assert "MissingDriveFileError" in err and "Traceback" not in err
+    assert main(["simulate", str(tmp_path / "x"), "--scene", "no_such_scene", "--quiet"]) == 2
+    assert "SceneSpecError" in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()
+
+
+def test_bad_image_size_is_refused(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        main(["simulate", "out", "--image-size", "big"])
+    assert "WIDTHxHEIGHT" in capsys.readouterr().err
