@@ -31,8 +31,8 @@ demo: setup
 	$(BIN)/guardrail demo --out $(DEMO_DRIVE)
 
 lint: setup
-	$(BIN)/ruff check guardrail_core app tests benchmarks
-	$(BIN)/ruff format --check guardrail_core app tests benchmarks
+	$(BIN)/ruff check guardrail_core app tests benchmarks docs
+	$(BIN)/ruff format --check guardrail_core app tests benchmarks docs
 	$(BIN)/mypy
 
 test: lint
