@@ -120,9 +120,25 @@ def draw_legend(
     for i, (text, colour) in enumerate(items):
         cy = y + 8 + i * row
         cv2.rectangle(img, (x + 8, cy), (x + 22, cy + 12), colour, -1)
-        cv2.putText(
-            img, text, (x + 30, cy + 11), font, scale, (255, 255, 255), 1, cv2.LINE_AA
-        )
+        cv2.putText(img, text, (x + 30, cy + 11), font, scale, (255, 255, 255), 1, cv2.LINE_AA)
+
+
+def legend_strip(
+    width: int, items: list[tuple[str, tuple[int, int, int]]], height: int = 30
+) -> np.ndarray:
+    """A dark strip ``width`` pixels wide with colour swatches and names in a row."""
+    strip = np.full((height, width, 3), 32, np.uint8)
+    font, scale = cv2.FONT_HERSHEY_SIMPLEX, 0.5
+    x = 10
+    for text, colour in items:
+        tw = cv2.getTextSize(text, font, scale, 1)[0][0]
+        if x + tw + 30 > width:
+            break
+        cy = height // 2
+        cv2.rectangle(strip, (x, cy - 6), (x + 12, cy + 6), colour, -1)
+        cv2.putText(strip, text, (x + 18, cy + 5), font, scale, (235, 235, 235), 1, cv2.LINE_AA)
+        x += tw + 36
+    return strip
 
 
 def class_name(cls: int) -> str:
@@ -135,7 +151,9 @@ def depth_colours(depth: np.ndarray, near: float, far: float) -> np.ndarray:
     near_c = np.array([90, 255, 230], np.float64)
     mid_c = np.array([70, 140, 255], np.float64)
     far_c = np.array([150, 70, 220], np.float64)
-    c = np.where(t < 0.5, near_c + (mid_c - near_c) * (t / 0.5), mid_c + (far_c - mid_c) * ((t - 0.5) / 0.5))
+    c = np.where(
+        t < 0.5, near_c + (mid_c - near_c) * (t / 0.5), mid_c + (far_c - mid_c) * ((t - 0.5) / 0.5)
+    )
     return c.astype(np.uint8)
 
 
@@ -199,20 +217,21 @@ def make_camera_projection(drive: Drive, out: Path, camera: str = "left") -> Ima
 
     # Dim and desaturate the photo a little so that the points stand out.
     grey = cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)[:, :, None].astype(np.float64)
-    canvas = (0.55 * image + 0.25 * grey).clip(0, 255).astype(np.uint8)
+    canvas = (0.7 * image + 0.2 * grey).clip(0, 255).astype(np.uint8)
 
     is_rail = np.isin(cls, list(GUARDRAIL_CLASSES))
     colours = depth_colours(depth, 2.0, PROJECTION_RANGE_M)
     colours[cls == TruthClass.GUARDRAIL] = PALETTE[TruthClass.GUARDRAIL]
     colours[cls == TruthClass.GUARDRAIL_POLE] = PALETTE[TruthClass.GUARDRAIL_POLE]
 
-    # Other points first, small and translucent; guardrail points last and larger; far first.
-    layer = canvas.copy()
+    # Other points as single pixels (the photo shows between the scan lines), far first so that
+    # near points win; guardrail points on top as small discs.
     px = np.round(uv).astype(np.int32)
-    for i in np.argsort(-depth):
-        if not is_rail[i]:
-            cv2.circle(layer, (int(px[i, 0]), int(px[i, 1])), 1, tuple(int(c) for c in colours[i]), -1)
-    canvas = cv2.addWeighted(layer, 0.75, canvas, 0.25, 0)
+    others = np.flatnonzero(~is_rail)
+    others = others[np.argsort(-depth[others])]
+    layer = canvas.copy()
+    layer[px[others, 1], px[others, 0]] = colours[others]
+    canvas = cv2.addWeighted(layer, 0.85, canvas, 0.15, 0)
     for i in np.flatnonzero(is_rail)[np.argsort(-depth[is_rail])]:
         cv2.circle(canvas, (int(px[i, 0]), int(px[i, 1])), 2, tuple(int(c) for c in colours[i]), -1)
 
@@ -271,7 +290,9 @@ def splat(
     v = focal * cam[:, 1] / cam[:, 2] + h / 2
     # Points nearer the eye are drawn larger.
     zs, us, vs, cs = [], [], [], []
-    offsets = [(du, dv) for du in range(-radius + 1, radius + 1) for dv in range(-radius + 1, radius + 1)]
+    offsets = [
+        (du, dv) for du in range(-radius + 1, radius + 1) for dv in range(-radius + 1, radius + 1)
+    ]
     for du, dv in offsets:
         ui = np.floor(u).astype(np.int64) + du
         vi = np.floor(v).astype(np.int64) + dv
@@ -340,8 +361,8 @@ def make_point_cloud(drive: Drive, out: Path, size: tuple[int, int] = (1400, 800
 
     focal = 0.62 * size[0]
     image, depth = splat(xyz, rgb, pose, size, focal, radius=1)
-    # Guardrails on top at 2 px so that thin pipes stay visible at distance.
-    rail_img, rail_depth = splat(xyz[rail], rgb[rail], pose, size, focal, radius=2)
+    # Guardrails again on top (with a depth slack) so that thin pipes stay visible at distance.
+    rail_img, rail_depth = splat(xyz[rail], rgb[rail], pose, size, focal, radius=1)
     win = rail_depth <= depth + 0.3
     image[win & np.isfinite(rail_depth)] = rail_img[win & np.isfinite(rail_depth)]
     depth = np.minimum(depth, rail_depth)
@@ -389,11 +410,8 @@ def make_truth_mask(drive: Drive, out: Path, record: ImageRecord) -> None:
     present = [int(c) for c in np.unique(mask) if int(c) in PALETTE and c != TruthClass.NONE]
     # Guardrail classes first, then the others by id.
     present.sort(key=lambda c: (c not in GUARDRAIL_CLASSES, c))
-    draw_legend(
-        both,
-        [(class_name(c), PALETTE[c]) for c in present],
-        (both.shape[1] - 150, both.shape[0] - 20 * len(present) - 14),
-    )
+    strip = legend_strip(both.shape[1], [(class_name(c), PALETTE[c]) for c in present])
+    both = np.concatenate([both, strip], axis=0)
     write_png(out / "truth_mask.png", both)
 
 
