@@ -7,15 +7,20 @@ STAMP := $(VENV)/.installed
 SYS_STAMP := $(VENV)/.system-packages
 DEMO_DRIVE ?= demo_output/sample_drive
 
-.PHONY: setup system-packages demo test lint bench clean
+.PHONY: setup demo test lint bench clean
 
 setup: $(STAMP)
 
-# open3d links against libusb and libgomp at import time.
+# open3d links against libusb and libgomp at import time; Debian's Python needs its venv package.
 $(SYS_STAMP):
-	@if ! ldconfig -p | grep -q libusb-1.0.so.0 || ! ldconfig -p | grep -q libgomp.so.1; then \
+	@missing=""; \
+	PATH="$$PATH:/sbin:/usr/sbin"; ldconfig -p | grep -q libusb-1.0.so.0 || missing="$$missing libusb-1.0-0"; \
+	ldconfig -p | grep -q libgomp.so.1 || missing="$$missing libgomp1"; \
+	$(PYTHON) -c 'import ensurepip, venv' 2>/dev/null || missing="$$missing python3-venv"; \
+	if [ -n "$$missing" ]; then \
 		SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
-		$$SUDO apt-get update -qq && $$SUDO apt-get install -y -qq libusb-1.0-0 libgomp1; \
+		echo "installing system packages:$$missing"; \
+		$$SUDO apt-get update -qq && $$SUDO apt-get install -y -qq $$missing; \
 	fi
 	@mkdir -p $(VENV) && touch $@
 

@@ -18,14 +18,24 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from guardrail_core.errors import DriveFormatError
+from guardrail_core.geometry import make_transform, rotation_from_euler
+
+#: Default mounting: on the roof at the rear, the rotation axis tilted 45 degrees up from the
+#: driving direction so that scan lines cross vertical roadside planes obliquely, as on the
+#: paper's MMS-X.
+DEFAULT_MOUNT_POSITION_M = (-0.6, 0.0, 0.55)
+DEFAULT_MOUNT_RPY_DEG = (0.0, -45.0, 0.0)
 
 
-def _default_mounting() -> np.ndarray:
-    from guardrail_core.geometry import make_transform, rotation_from_euler
-
-    # On the roof at the rear, the rotation axis tilted 45 degrees from the driving direction so
-    # that scan lines cross vertical roadside planes obliquely, as on the paper's MMS-X.
-    return make_transform(rotation_from_euler(0.0, np.deg2rad(-45.0), 0.0), [-0.6, 0.0, 0.55])
+def scanner_mounting(
+    position_m: tuple[float, float, float] = DEFAULT_MOUNT_POSITION_M,
+    roll_deg: float = DEFAULT_MOUNT_RPY_DEG[0],
+    pitch_deg: float = DEFAULT_MOUNT_RPY_DEG[1],
+    yaw_deg: float = DEFAULT_MOUNT_RPY_DEG[2],
+) -> np.ndarray:
+    """``T_vehicle_scanner`` (4, 4) from a position (m, vehicle frame) and Z-Y-X angles (degrees)."""
+    rotation = rotation_from_euler(np.deg2rad(roll_deg), np.deg2rad(pitch_deg), np.deg2rad(yaw_deg))
+    return make_transform(rotation, position_m)
 
 
 @dataclass(frozen=True)
@@ -50,7 +60,7 @@ class ScannerParams:
     range_noise_m: float = 0.005
     min_range_m: float = 1.5
     max_range_m: float = 120.0
-    T_vehicle_scanner: np.ndarray = field(default_factory=_default_mounting)
+    T_vehicle_scanner: np.ndarray = field(default_factory=scanner_mounting)
 
     def __post_init__(self) -> None:
         ratio = self.measurements_per_second / self.rotations_per_second

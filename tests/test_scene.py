@@ -99,6 +99,12 @@ def _spec() -> dict:
         (lambda s: s["objects"][0].update(kind="ufo"), "unknown kind 'ufo'"),
         (lambda s: s["objects"][0].update(at=1000), r"objects\[0\].at"),
         (lambda s: s.update(origin=[1, 2]), "origin"),
+        (lambda s: s.update(scanner={"measurements_per_second": 123_457}), "whole multiple"),
+        (lambda s: s.update(scanner={"mounting": {"position_m": [0, 0]}}), "position_m"),
+        (
+            lambda s: s.update(scanner={"mounting": {"pitch_deg": "steep"}}),
+            "pitch_deg: expected a number",
+        ),
     ],
 )
 def test_bad_specs_name_what_is_wrong(edit, message: str) -> None:

@@ -15,7 +15,13 @@ from typing import Any
 import numpy as np
 import yaml
 
-from guardrail_core.errors import SceneSpecError
+from guardrail_core.errors import DriveFormatError, SceneSpecError
+from guardrail_core.scanner_model import (
+    DEFAULT_MOUNT_POSITION_M,
+    DEFAULT_MOUNT_RPY_DEG,
+    ScannerParams,
+    scanner_mounting,
+)
 from guardrail_core.synth.confounders import CONFOUNDER_KINDS, build_confounder
 from guardrail_core.synth.designs import list_designs, load_design
 from guardrail_core.synth.guardrail import build_guardrail_run
@@ -40,6 +46,7 @@ class Scene:
     spec : dict, the spec it was built from (normalised)
     road : Road
     vehicle : VehicleParams
+    scanner : ScannerParams, the scanner on the vehicle (``t0`` set when the drive starts)
     drive_span : (s_start, s_end) metres along the road that the vehicle drives
     mesh : SceneMesh, every surface with its truth
     objects : list of dict, truth records (``truth/objects.json``)
@@ -49,6 +56,7 @@ class Scene:
     spec: dict
     road: Road
     vehicle: VehicleParams
+    scanner: ScannerParams
     drive_span: tuple[float, float]
     mesh: SceneMesh
     objects: list[dict]
@@ -172,6 +180,43 @@ def _vehicle(data: dict, road: Road) -> tuple[VehicleParams, tuple[float, float]
     return params, (start, end)
 
 
+def _scanner(data: object) -> ScannerParams:
+    """The optional ``scanner`` section: rates, noise and mounting (RIEGL VQ-250 defaults)."""
+    if not isinstance(data, dict):
+        raise SceneSpecError("scanner: expected a mapping")
+    where = "scanner"
+    mount = _get(data, "mounting", dict, where, {})
+    position = _get(mount, "position_m", list, "scanner.mounting", list(DEFAULT_MOUNT_POSITION_M))
+    if len(position) != 3 or not all(isinstance(v, int | float) for v in position):
+        raise SceneSpecError(
+            f"scanner.mounting.position_m: expected [x, y, z] metres, got {position}"
+        )
+    defaults = ScannerParams()
+    try:
+        return ScannerParams(
+            rotations_per_second=_get(
+                data, "rotations_per_second", float, where, defaults.rotations_per_second
+            ),
+            measurements_per_second=_get(
+                data, "measurements_per_second", float, where, defaults.measurements_per_second
+            ),
+            range_noise_m=_get(data, "range_noise_m", float, where, defaults.range_noise_m),
+            max_range_m=_get(data, "max_range_m", float, where, defaults.max_range_m),
+            T_vehicle_scanner=scanner_mounting(
+                (float(position[0]), float(position[1]), float(position[2])),
+                roll_deg=_get(
+                    mount, "roll_deg", float, "scanner.mounting", DEFAULT_MOUNT_RPY_DEG[0]
+                ),
+                pitch_deg=_get(
+                    mount, "pitch_deg", float, "scanner.mounting", DEFAULT_MOUNT_RPY_DEG[1]
+                ),
+                yaw_deg=_get(mount, "yaw_deg", float, "scanner.mounting", DEFAULT_MOUNT_RPY_DEG[2]),
+            ),
+        )
+    except DriveFormatError as exc:
+        raise SceneSpecError(str(exc)) from exc
+
+
 def _side(item: dict, where: str) -> str:
     side = _get(item, "side", str, where)
     if side not in SIDES:
@@ -199,6 +244,7 @@ def build_scene(spec: dict, *, seed: int = 0) -> Scene:
     rng = np.random.default_rng(seed)
     road = Road(_road_spec(spec.get("road")))
     vehicle, span = _vehicle(spec.get("vehicle") or {}, road)
+    scanner = _scanner(spec.get("scanner") or {})
     builder = MeshBuilder()
     road.build_mesh(builder)
     objects: list[dict] = []
@@ -277,6 +323,7 @@ def build_scene(spec: dict, *, seed: int = 0) -> Scene:
         spec=spec,
         road=road,
         vehicle=vehicle,
+        scanner=scanner,
         drive_span=span,
         mesh=builder.build(),
         objects=objects,

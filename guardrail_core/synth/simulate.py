@@ -24,7 +24,6 @@ from guardrail_core.drive import (
     write_drive_files,
 )
 from guardrail_core.errors import GuardrailError, MissingDriveFileError
-from guardrail_core.scanner_model import ScannerParams
 from guardrail_core.synth.camera_render import random_lighting, render_image
 from guardrail_core.synth.camera_rig import default_camera_rig
 from guardrail_core.synth.raycast import SceneRaycaster
@@ -44,14 +43,12 @@ class SimulationOptions:
     image_every_m : float, metres driven between camera shots (all cameras fire together)
     image_size : (width, height) pixels of every camera
     jpeg_quality : int, 0-100
-    scanner : ScannerParams, the scanner (its ``t0`` is set to the drive's first GPS time)
     compress : bool, LAZ (True) or LAS (False)
     """
 
     image_every_m: float = 5.0
     image_size: tuple[int, int] = (1024, 768)
     jpeg_quality: int = 92
-    scanner: ScannerParams = dataclasses.field(default_factory=ScannerParams)
     compress: bool = True
 
 
@@ -101,7 +98,7 @@ def simulate_drive(
             t0=t0,
             rng=np.random.default_rng(motion_seq),
         )
-        scanner = dataclasses.replace(options.scanner, t0=float(trajectory.time[0]))
+        scanner = dataclasses.replace(scene.scanner, t0=float(trajectory.time[0]))
         raycaster = SceneRaycaster(scene.mesh)
         n_rot = int((trajectory.time[-1] - trajectory.time[0]) * scanner.rotations_per_second)
         with tqdm(

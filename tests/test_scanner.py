@@ -1,0 +1,85 @@
+"""The scanner model: the lattice arithmetic, the mounting's scan lines, noise and intensity."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from guardrail_core.errors import DriveFormatError
+from guardrail_core.scanner_model import ScannerParams, scanner_mounting
+from guardrail_core.synth.mesh import MeshBuilder, box
+from guardrail_core.synth.raycast import SceneRaycaster
+from guardrail_core.synth.scanner import scan
+from guardrail_core.trajectory import Trajectory
+
+WALL_Y = 4.0  # a wall 4 m to the vehicle's left, along its path
+
+
+def _wall_scene(material: str = "concrete") -> SceneRaycaster:
+    builder = MeshBuilder()
+    builder.add(
+        box([50.0, WALL_Y + 0.1, 1.0], [120.0, 0.2, 6.0]), cls=9, object_id=1, material=material
+    )
+    return SceneRaycaster(builder.build())
+
+
+def _straight_drive(seconds: float = 0.2, speed: float = 10.0) -> Trajectory:
+    t = 1000.0 + np.arange(0.0, seconds + 1e-9, 0.01)
+    position = np.stack([5.0 + speed * (t - t[0]), np.zeros_like(t), np.full_like(t, 1.8)], axis=1)
+    return Trajectory(time=t, position=position, attitude=np.zeros((len(t), 3)))
+
+
+def _scan_lines_slope(pitch_deg: float) -> float:
+    """Median d(along)/d(height) of each rotation's points on the wall."""
+    scanner = ScannerParams(t0=1000.0, T_vehicle_scanner=scanner_mounting(pitch_deg=pitch_deg))
+    result = scan(_wall_scene(), _straight_drive(), scanner, np.random.default_rng(0))
+    on_wall = np.abs(result.xyz[:, 1] - WALL_Y) < 0.05
+    slopes = []
+    for r in np.unique(result.rotation[on_wall]):
+        pts = result.xyz[on_wall & (result.rotation == r)]
+        if np.ptp(pts[:, 2]) > 1.0:
+            slopes.append(np.polyfit(pts[:, 2], pts[:, 0], 1)[0])
+    assert len(slopes) >= 10
+    return float(np.median(slopes))
+
+
+def test_lattice_arithmetic_round_trips() -> None:
+    scanner = ScannerParams(t0=345_600.0)
+    k = np.array([0, 1, 2999, 3000, 123_456_789])
+    t = scanner.t0 + k / scanner.measurements_per_second
+    rotation, phase = scanner.lattice_from_gps_time(t)
+    np.testing.assert_array_equal(rotation, k // 3000)
+    np.testing.assert_array_equal(phase, k % 3000)
+    np.testing.assert_allclose(scanner.gps_time_of(rotation, phase), t, rtol=0, atol=1e-9)
+
+
+def test_rates_that_make_no_lattice_are_refused() -> None:
+    with pytest.raises(DriveFormatError, match="whole multiple"):
+        ScannerParams(rotations_per_second=100.0, measurements_per_second=150_050.0)
+
+
+@pytest.mark.parametrize(
+    ("pitch_deg", "slope"), [(0.0, 0.0), (-45.0, -1.0), (-30.0, -np.tan(np.deg2rad(30)))]
+)
+def test_mounting_pitch_sets_the_slope_of_the_scan_lines(pitch_deg: float, slope: float) -> None:
+    # A scan plane tilted by the mounting pitch meets a vertical wall along lines of that slope
+    # (plus the ~1 cm the vehicle moves while the beam sweeps the wall).
+    assert _scan_lines_slope(pitch_deg) == pytest.approx(slope, abs=0.05)
+
+
+def test_range_noise_and_one_return_per_pulse() -> None:
+    scanner = ScannerParams(t0=1000.0, range_noise_m=0.005)
+    result = scan(_wall_scene(), _straight_drive(), scanner, np.random.default_rng(1))
+    on_wall = np.abs(result.xyz[:, 1] - WALL_Y) < 0.05
+    # Off-plane scatter of wall points: the along-beam noise projected on the wall's normal.
+    assert 0.002 < np.std(result.xyz[on_wall, 1] - WALL_Y) < 0.006
+    k = scanner.measurement_index(result.gps_time)
+    assert np.all(np.diff(k) > 0)
+
+
+def test_intensity_follows_reflectivity() -> None:
+    scanner = ScannerParams(t0=1000.0)
+    bright = scan(_wall_scene("white"), _straight_drive(), scanner, np.random.default_rng(2))
+    dark = scan(_wall_scene("rubber"), _straight_drive(), scanner, np.random.default_rng(2))
+    assert np.median(bright.intensity) > 2 * np.median(dark.intensity)
+    assert len(dark.xyz) < len(bright.xyz)  # weak returns drop out
