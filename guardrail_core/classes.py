@@ -34,8 +34,3 @@ class TruthClass(IntEnum):
 
 #: Classes that together make a guardrail: the detection target of §3.
 GUARDRAIL_CLASSES: frozenset[int] = frozenset({TruthClass.GUARDRAIL, TruthClass.GUARDRAIL_POLE})
-
-#: Classes removed as road surface by §3.1 (what a perfect road removal would take away).
-GROUND_CLASSES: frozenset[int] = frozenset(
-    {TruthClass.ROAD, TruthClass.ROAD_MARKING, TruthClass.SIDEWALK, TruthClass.TERRAIN}
-)

@@ -40,5 +40,9 @@ class SceneSpecError(GuardrailError):
     """A scene or design spec (YAML) is malformed or refers to something unknown."""
 
 
+class InvalidOptionError(GuardrailError):
+    """An option (of a command or a function) is outside its valid range."""
+
+
 class OutputExistsError(GuardrailError):
     """The output folder exists and is not empty; nothing is overwritten without asking."""

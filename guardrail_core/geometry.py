@@ -41,15 +41,6 @@ def rotation_from_euler(
     return r
 
 
-def euler_from_rotation(r: np.ndarray) -> np.ndarray:
-    """Inverse of :func:`rotation_from_euler`: ``(..., 3, 3)`` to ``(..., 3)`` roll, pitch, yaw."""
-    r = np.asarray(r, np.float64)
-    pitch = -np.arcsin(np.clip(r[..., 2, 0], -1.0, 1.0))
-    roll = np.arctan2(r[..., 2, 1], r[..., 2, 2])
-    yaw = np.arctan2(r[..., 1, 0], r[..., 0, 0])
-    return np.stack([roll, pitch, yaw], axis=-1)
-
-
 def make_transform(rotation: npt.ArrayLike, translation: npt.ArrayLike) -> np.ndarray:
     """A 4x4 transform from a rotation (3, 3) and a translation (3,)."""
     t = np.eye(4)

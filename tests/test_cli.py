@@ -65,6 +65,14 @@ def test_errors_are_reported_without_a_traceback(
     assert not (tmp_path / "x").exists()
 
 
+def test_bad_image_spacing_is_refused_before_anything_is_written(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["simulate", str(tmp_path / "x"), "--image-every", "0", "--quiet"]) == 2
+    assert "InvalidOptionError: image spacing must be positive" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_bad_image_size_is_refused(capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit):
         main(["simulate", "out", "--image-size", "big"])

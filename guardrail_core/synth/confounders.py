@@ -61,9 +61,6 @@ class _Frame:
         """A box centred at local (a, c, u) with size (along, across, up)."""
         return box(self.at(a, c, u), np.asarray(size_acu, np.float64), self.rotation)
 
-    def local(self, vertices: np.ndarray) -> np.ndarray:
-        return (np.asarray(vertices) - self.base) @ self.rotation
-
 
 def _horizontal_unit(v, name: str) -> np.ndarray:
     v = np.asarray(v, np.float64).reshape(-1)

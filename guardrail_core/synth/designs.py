@@ -104,14 +104,6 @@ class Design:
     beams: tuple[BeamSpec, ...]
     description: str
 
-    @property
-    def top_height(self) -> float:
-        """Highest point of the design above ground (m), including pipe and beam surfaces."""
-        tops = [self.pole.height + (self.pole.radius if self.pole.cap else 0.0)]
-        tops += [float(p.points[:, 1].max()) + p.radius for p in self.pipes]
-        tops += [float(b.section[:, 1].max()) + b.thickness / 2 for b in self.beams]
-        return max(tops)
-
 
 # --------------------------------------------------------------------------------------------
 # Standard beam sections

@@ -517,8 +517,3 @@ def _object(kind: str, side: str, at: float, walk: float, rng: np.random.Generat
     if kind in {"mesh_fence", "bar_fence", "bicycle_rack", "bollard", "utility_pole", "sign_pole"}:
         item["paint"] = str(rng.choice(list(PAINTS)))
     return item
-
-
-def dump_spec(spec: dict) -> str:
-    """A spec as YAML text (to save what a random scene was)."""
-    return yaml.safe_dump(spec, sort_keys=False)

@@ -23,13 +23,14 @@ from guardrail_core.drive import (
     commit_folder,
     write_drive_files,
 )
-from guardrail_core.errors import GuardrailError, MissingDriveFileError
+from guardrail_core.errors import InvalidOptionError, MissingDriveFileError
 from guardrail_core.synth.camera_render import random_lighting, render_image
 from guardrail_core.synth.camera_rig import default_camera_rig
 from guardrail_core.synth.raycast import SceneRaycaster
 from guardrail_core.synth.scanner import scan
 from guardrail_core.synth.scene import Scene, build_scene
 from guardrail_core.synth.vehicle import drive_along
+from guardrail_core.trajectory import Trajectory
 
 SIMULATOR_VERSION = "1"
 
@@ -50,6 +51,17 @@ class SimulationOptions:
     image_size: tuple[int, int] = (1024, 768)
     jpeg_quality: int = 92
     compress: bool = True
+
+    def __post_init__(self) -> None:
+        width, height = self.image_size
+        if not self.image_every_m > 0:
+            raise InvalidOptionError(f"image spacing must be positive, got {self.image_every_m} m")
+        if min(width, height) < 16:
+            raise InvalidOptionError(
+                f"images must be at least 16 x 16 pixels, got {width} x {height}"
+            )
+        if not 0 <= self.jpeg_quality <= 100:
+            raise InvalidOptionError(f"JPEG quality lies in 0..100, got {self.jpeg_quality}")
 
 
 @dataclass(frozen=True)
@@ -115,7 +127,6 @@ def simulate_drive(
         clock = time.perf_counter()
         cameras = default_camera_rig(width=options.image_size[0], height=options.image_size[1])
         images = _shoot(
-            scene,
             raycaster,
             trajectory,
             cameras,
@@ -182,9 +193,8 @@ def rebuild_scene(drive: Drive) -> Scene:
 
 
 def _shoot(
-    scene: Scene,
     raycaster: SceneRaycaster,
-    trajectory,
+    trajectory: Trajectory,
     cameras: list[Camera],
     options: SimulationOptions,
     folder: Path,
@@ -192,8 +202,6 @@ def _shoot(
     progress: bool,
 ) -> list[ImageRecord]:
     """Fire every camera each ``image_every_m`` metres; write images and truth masks."""
-    if options.image_every_m <= 0:
-        raise GuardrailError(f"image spacing must be positive, got {options.image_every_m} m")
     travelled = np.concatenate(
         [[0.0], np.cumsum(np.linalg.norm(np.diff(trajectory.position, axis=0), axis=1))]
     )
