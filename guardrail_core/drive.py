@@ -185,7 +185,9 @@ def read_trajectory_csv(path: Path, origin: np.ndarray, reference_height_m: floa
             -1, len(rows[0]) if rows else 7
         )
     except ValueError as exc:
-        raise DriveFormatError(f"{path}: a value is not a number ({exc})") from exc
+        raise DriveFormatError(
+            f"{path}: a row is malformed or a value is not a number ({exc})"
+        ) from exc
     if data.ndim != 2 or data.shape[1] != 7 or data.shape[0] < 2:
         raise DriveDimensionError(
             f"{path}: expected at least 2 rows of 7 columns, got shape {data.shape}"
