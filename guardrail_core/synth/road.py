@@ -139,16 +139,15 @@ class Road:
             for i in range(1, spec.lanes)
         ]
         breaks = sorted({-hw, hw, 0.0, *[v for pair in solid + dashed for v in pair]})
-        marked = {pair for pair in solid + dashed}
         for l0, l1 in zip(breaks[:-1], breaks[1:], strict=True):
-            if (l0, l1) in marked and (l0, l1) in solid:
+            if (l0, l1) in solid:
                 builder.add(
                     self._strip(s, l0, l1),
                     cls=TruthClass.ROAD_MARKING,
                     object_id=0,
                     material="lane_paint",
                 )
-            elif (l0, l1) in marked:
+            elif (l0, l1) in dashed:
                 on, off = spec.dash_m
                 phase = np.mod(s, on + off) < on
                 self._add_dashes(builder, s, phase, l0, l1)
