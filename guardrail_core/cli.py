@@ -36,7 +36,10 @@ def _simulate(args: argparse.Namespace) -> int:
                 "note: --length is ignored with --scene (the spec sets the drive)", file=sys.stderr
             )
     else:
-        spec = random_scene_spec(args.seed, args.length if args.length is not None else 100.0)
+        designs = args.designs.split(",") if args.designs else None
+        spec = random_scene_spec(
+            args.seed, args.length if args.length is not None else 100.0, designs=designs
+        )
     options = SimulationOptions(
         image_every_m=args.image_every, image_size=args.image_size, compress=not args.las
     )
@@ -62,6 +65,84 @@ def _info(args: argparse.Namespace) -> int:
     return 0
 
 
+def _train(args: argparse.Namespace) -> int:
+    from guardrail_core.extract.classify import ClassifierParams
+    from guardrail_core.extract.model_store import save_model
+    from guardrail_core.training import train_from_drives
+
+    params = ClassifierParams(mode=args.mode, seed=args.seed)
+    model = train_from_drives(args.drives, params=params, progress=not args.quiet)
+    save_model(model, args.out, overwrite=args.overwrite)
+    print(f"trained a {model.mode} model {model.version} into {args.out}")
+    print(_held_out_report(model.info))
+    return 0
+
+
+def _held_out_report(info: dict) -> str:
+    metrics = info.get("metrics", {}).get("held_out", {})
+    trained = info.get("trained_on", {})
+    lines = [
+        f"trained on {trained.get('crops', '?')} crops "
+        f"({trained.get('guardrail', '?')} guardrail, {trained.get('other', '?')} other); "
+        f"held out {metrics.get('n_held_out', '?')}:"
+    ]
+    for name in ("guardrail", "other"):
+        m = metrics.get(name)
+        if m:
+            lines.append(
+                f"  {name:10s} recall {100 * m['recall']:5.1f}%  precision "
+                f"{100 * m['precision']:5.1f}%  F {100 * m['f1']:5.1f}%  (n={m['n']})"
+            )
+    return "\n".join(lines)
+
+
+def _process(args: argparse.Namespace) -> int:
+    from guardrail_core.drive import load_drive
+    from guardrail_core.extract.model_store import load_model
+    from guardrail_core.pipeline import process_drive
+
+    model = load_model(args.model)
+    drive = load_drive(args.drive, with_truth=False)
+    info = process_drive(drive, model, args.out, overwrite=args.overwrite, progress=not args.quiet)
+    counts = info["counts"]
+    crops = counts["crops"]
+    print(
+        f"{counts['segments']} segments from {counts['segment_points']} of {counts['points']} "
+        f"points ({counts['road_points']} road surface, {counts['off_road_points']} far from the road)"
+    )
+    print(
+        f"crops: {crops['ok']} ok, {crops['no_image']} with no image that holds all their points, "
+        f"{crops['too_small']} too small to crop"
+    )
+    if crops["ok"] == 0 and counts["segments"]:
+        print(
+            "warning: no segment has a usable image, so nothing could be classified",
+            file=sys.stderr,
+        )
+    print(
+        f"guardrail segments: {counts['guardrail_segments_raw']} raw, "
+        f"{counts['guardrail_segments']} after label correction "
+        f"({counts['guardrail_points']} points)"
+    )
+    print(f"wrote {args.out}")
+    return 0
+
+
+def _evaluate(args: argparse.Namespace) -> int:
+    import json
+
+    from guardrail_core.drive import load_drive
+    from guardrail_core.evaluate import evaluate_run, format_report
+    from guardrail_core.run_folder import load_run
+
+    result = evaluate_run(load_drive(args.drive), load_run(args.run))
+    if args.json:
+        print(json.dumps(result, indent=2))
+    else:
+        print(format_report(result))
+    return 0
+
+
 def _demo(args: argparse.Namespace) -> int:
     from guardrail_core.drive import load_drive
     from guardrail_core.drive_summary import describe_drive
@@ -77,6 +158,24 @@ def _demo(args: argparse.Namespace) -> int:
         )
         print(f"simulated the sample drive into {out}")
     print(describe_drive(load_drive(out)))
+
+    from guardrail_core.evaluate import evaluate_run, format_report
+    from guardrail_core.extract.classify import ClassifierParams
+    from guardrail_core.extract.model_store import save_model
+    from guardrail_core.pipeline import process_drive
+    from guardrail_core.run_folder import load_run
+    from guardrail_core.training import train_from_drives
+
+    model_dir, run_dir = out.parent / "model", out.parent / "run"
+    print(f"\ntraining a fast model on the sample drive's truth into {model_dir}")
+    model = train_from_drives([out], params=ClassifierParams(mode="fast"), progress=not args.quiet)
+    save_model(model, model_dir, overwrite=True)
+    print(_held_out_report(model.info))
+    print(f"\nprocessing the sample drive into {run_dir}")
+    drive = load_drive(out)
+    process_drive(drive, model, run_dir, overwrite=True, progress=not args.quiet)
+    print("\nthe model was trained on this drive, so these figures are in-sample:")
+    print(format_report(evaluate_run(drive, load_run(run_dir))))
     return 0
 
 
@@ -104,6 +203,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sim.add_argument(
         "--scene", help="scene spec YAML (a path, or the name of one in data_samples/scenes)"
+    )
+    sim.add_argument(
+        "--designs",
+        metavar="NAME,...",
+        help="guardrail designs a random scene may use (default: every shipped design)",
     )
     sim.add_argument(
         "--image-every",
@@ -134,11 +238,56 @@ def build_parser() -> argparse.ArgumentParser:
     info.add_argument("drive", type=Path)
     info.set_defaults(func=_info)
 
+    train = sub.add_parser(
+        "train",
+        help="train the guardrail classifier on labelled drives",
+        description="Extract the segments of each DRIVE, label their crops from truth/, and "
+        "fine-tune the ImageNet-pretrained EfficientNet-Lite0 (two classes: guardrail, other).",
+    )
+    train.add_argument("drives", type=Path, nargs="+", metavar="DRIVE")
+    train.add_argument("--out", type=Path, required=True, help="model folder to write")
+    train.add_argument(
+        "--mode",
+        choices=("fast", "full"),
+        default="fast",
+        help="fast: frozen backbone and a small head, seconds; full: the whole network, minutes "
+        "(default fast)",
+    )
+    train.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    train.add_argument("--overwrite", action="store_true", help="replace the model folder")
+    train.add_argument("--quiet", action="store_true", help="no progress bars")
+    train.set_defaults(func=_train)
+
+    process = sub.add_parser(
+        "process",
+        help="extract guardrail segments from a drive",
+        description="Remove the road, cut the rest into 0.5 m segments, crop each segment's "
+        "image, classify it and correct the labels; write everything into the run folder.",
+    )
+    process.add_argument("drive", type=Path)
+    process.add_argument("--model", type=Path, required=True, help="model folder (guardrail train)")
+    process.add_argument("--out", type=Path, required=True, help="run folder to write")
+    process.add_argument("--overwrite", action="store_true", help="replace the run folder")
+    process.add_argument("--quiet", action="store_true", help="no progress bars")
+    process.set_defaults(func=_process)
+
+    evaluate = sub.add_parser(
+        "evaluate",
+        help="compare a run with the drive's truth",
+        description="Print the paper's Table 1 (segments per class) and Table 2 (recall, "
+        "precision, F-measure per class) before and after label correction.",
+    )
+    evaluate.add_argument("drive", type=Path)
+    evaluate.add_argument("--run", type=Path, required=True, help="run folder (guardrail process)")
+    evaluate.add_argument("--json", action="store_true", help="print one JSON object instead")
+    evaluate.set_defaults(func=_evaluate)
+
     demo = sub.add_parser(
         "demo",
-        help="simulate the sample drive and describe it",
+        help="simulate the sample drive, train on it and process it",
         description="The end-to-end demo: simulate the sample drive "
-        "(data_samples/scenes/sample.yaml) and show what is in it.",
+        "(data_samples/scenes/sample.yaml) into --out, train a fast model on it (model/ beside "
+        "it), process it (run/ beside it) and evaluate the run.",
     )
     demo.add_argument("--out", type=Path, default=Path("demo_output/sample_drive"))
     demo.add_argument(

@@ -46,3 +46,27 @@ class InvalidOptionError(GuardrailError):
 
 class OutputExistsError(GuardrailError):
     """The output folder exists and is not empty; nothing is overwritten without asking."""
+
+
+class EmptyDriveError(DriveError):
+    """The drive holds no points to process (none at all, or none left after road removal)."""
+
+
+class ModelError(GuardrailError):
+    """A classifier model folder cannot be read or used."""
+
+
+class ModelFormatError(ModelError):
+    """A model folder lacks a file, or a file does not follow the model format."""
+
+
+class IncompatibleModelError(ModelError):
+    """A model folder was written by an incompatible format version or for another architecture."""
+
+
+class TrainingDataError(GuardrailError):
+    """There is not enough labelled data to train (too few crops, or only one class)."""
+
+
+class RunFolderError(GuardrailError):
+    """A run folder is missing a file or does not match the drive it is evaluated against."""

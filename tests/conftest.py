@@ -30,3 +30,26 @@ def drive_path(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.fixture(scope="session")
 def drive(drive_path: Path) -> Drive:
     return load_drive(drive_path)
+
+
+@pytest.fixture(scope="session")
+def model_path(drive_path: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A fast-mode classifier trained on the test drive's truth."""
+    from guardrail_core.extract.classify import ClassifierParams
+    from guardrail_core.extract.model_store import save_model
+    from guardrail_core.training import train_from_drives
+
+    out = tmp_path_factory.mktemp("models") / "fast"
+    save_model(train_from_drives([drive_path], params=ClassifierParams(mode="fast")), out)
+    return out
+
+
+@pytest.fixture(scope="session")
+def run_path(drive: Drive, model_path: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The test drive processed with :func:`model_path`."""
+    from guardrail_core.extract.model_store import load_model
+    from guardrail_core.pipeline import process_drive
+
+    out = tmp_path_factory.mktemp("runs") / "run"
+    process_drive(drive, load_model(model_path), out)
+    return out

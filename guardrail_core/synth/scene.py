@@ -8,6 +8,7 @@ seed; :func:`build_scene` turns a spec into meshes and ``truth/objects.json`` re
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -373,14 +374,22 @@ _EXTENT = {
 }
 
 
-def random_scene_spec(seed: int, length: float) -> dict:
+def random_scene_spec(seed: int, length: float, designs: Sequence[str] | None = None) -> dict:
     """A random street ``length`` metres long (plus run-in and run-out) mixing every design and kind.
 
-    Guardrail runs take turns through all shipped designs; confounders take turns through all
-    kinds, so a drive of ~150 m or more holds each of them at least once.
+    Guardrail runs take turns through ``designs`` (default: all shipped designs); confounders take
+    turns through all kinds, so a drive of ~150 m or more holds each of them at least once.
     """
     if length < 20:
         raise SceneSpecError(f"--length: a drive needs at least 20 m, got {length} m")
+    shipped = list_designs()
+    design_pool = shipped if designs is None else list(designs)
+    unknown = sorted(set(design_pool) - set(shipped))
+    if unknown or not design_pool:
+        raise SceneSpecError(
+            f"--designs: unknown design(s) {', '.join(unknown) or '(none given)'}; "
+            f"shipped designs are {', '.join(shipped)}"
+        )
     rng = np.random.default_rng(seed)
     margin = 25.0
     total = length + 2 * margin
@@ -419,7 +428,7 @@ def random_scene_spec(seed: int, length: float) -> dict:
         "end": margin + length,
     }
 
-    designs = [str(d) for d in rng.permutation(list_designs())]
+    queue = [str(d) for d in rng.permutation(design_pool)]
     kinds = [str(k) for k in rng.permutation(CONFOUNDER_KINDS)]
     guardrails: list[dict] = []
     objects: list[dict] = []
@@ -438,7 +447,7 @@ def random_scene_spec(seed: int, length: float) -> dict:
         walk = sidewalk[side]
         s = float(rng.uniform(0, 10))
         while s < total - 8:
-            design = load_design(designs.pop(0) if designs else str(rng.choice(list_designs())))
+            design = load_design(queue.pop(0) if queue else str(rng.choice(design_pool)))
             spacing = design.unit_length
             units = int(rng.integers(3, 13 if spacing < 3 else 7))
             run = units * spacing

@@ -1,0 +1,153 @@
+"""Metrics against the truth: the paper's Table 1 (segments per class) and Table 2 (recall,
+precision, F-measure per class), before and after label correction."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from guardrail_core.classes import GUARDRAIL_CLASSES
+from guardrail_core.drive import Drive
+from guardrail_core.errors import MissingDriveFileError, RunFolderError
+from guardrail_core.extract.crops import CROP_STATUS_NAMES
+from guardrail_core.run_folder import Run
+
+
+def segment_truth(
+    point_class: np.ndarray, point_segment: np.ndarray, n_segments: int
+) -> np.ndarray:
+    """True class (S,) bool of every segment: guardrail when most of its points are guardrail.
+
+    Parameters
+    ----------
+    point_class : (N,) truth class of every point (:class:`guardrail_core.classes.TruthClass`)
+    point_segment : (N,) segment of every point, negative for points in no segment
+    n_segments : S
+    """
+    in_segment = point_segment >= 0
+    segment = point_segment[in_segment]
+    guardrail = np.isin(point_class[in_segment], list(GUARDRAIL_CLASSES))
+    n_guardrail = np.bincount(segment, weights=guardrail, minlength=n_segments)
+    n_points = np.bincount(segment, minlength=n_segments)
+    return 2 * n_guardrail > n_points
+
+
+def detection_metrics(truth: np.ndarray, predicted: np.ndarray) -> dict[str, dict[str, Any]]:
+    """Recall, precision and F-measure of both classes (Table 2), with the true counts.
+
+    Parameters
+    ----------
+    truth, predicted : (S,) bool, True for guardrail
+    """
+    out: dict[str, dict[str, Any]] = {}
+    for name, t, p in (("guardrail", truth, predicted), ("other", ~truth, ~predicted)):
+        tp = int((t & p).sum())
+        n_true, n_predicted = int(t.sum()), int(p.sum())
+        recall = tp / n_true if n_true else float("nan")
+        precision = tp / n_predicted if n_predicted else float("nan")
+        f1 = 2 * recall * precision / (recall + precision) if recall + precision > 0 else 0.0
+        out[name] = {
+            "recall": recall,
+            "precision": precision,
+            "f1": f1,
+            "n_true": n_true,
+            "n_predicted": n_predicted,
+        }
+    return out
+
+
+def evaluate_run(drive: Drive, run: Run) -> dict[str, Any]:
+    """Compare a run's segment labels with the drive's truth.
+
+    Returns
+    -------
+    ``{"segments": Table 1 counts, "crops": crop status counts, "detection": metrics after
+    correction, "detection_raw": before correction, "points": guardrail point recall and
+    precision after correction}``
+
+    Raises
+    ------
+    MissingDriveFileError
+        The drive has no truth (only synthetic drives do).
+    RunFolderError
+        The run was made from a drive with another number of points.
+    """
+    if drive.truth is None:
+        raise MissingDriveFileError(
+            f"{drive.root}: no truth/ folder, so there is nothing to evaluate against"
+        )
+    if len(run.point_segment) != len(drive.points):
+        raise RunFolderError(
+            f"{run.root}: made from a drive of {len(run.point_segment)} points, but "
+            f"{drive.root} has {len(drive.points)}"
+        )
+    n = len(run)
+    truth = segment_truth(drive.truth.point_class, run.point_segment, n)
+    raw, label = run.segments["raw_label"], run.segments["label"]
+    status = run.segments["crop_status"]
+
+    point_guardrail = np.isin(drive.truth.point_class, list(GUARDRAIL_CLASSES))
+    in_segment = run.point_segment >= 0
+    point_label = np.zeros(len(point_guardrail), bool)
+    point_label[in_segment] = label[run.point_segment[in_segment]]
+    tp = int((point_guardrail & point_label).sum())
+    return {
+        "segments": {
+            "guardrail": int(truth.sum()),
+            "other": int((~truth).sum()),
+            "total": n,
+        },
+        "crops": {
+            name: {
+                "guardrail": int((truth & (status == code)).sum()),
+                "other": int((~truth & (status == code)).sum()),
+            }
+            for code, name in CROP_STATUS_NAMES.items()
+        },
+        "detection": detection_metrics(truth, label),
+        "detection_raw": detection_metrics(truth, raw),
+        "points": {
+            "guardrail": {
+                "recall": tp / max(int(point_guardrail.sum()), 1),
+                "precision": tp / max(int(point_label.sum()), 1),
+                "n_true": int(point_guardrail.sum()),
+            }
+        },
+    }
+
+
+def format_report(result: dict[str, Any]) -> str:
+    """The evaluation as the paper's two tables, plain text."""
+    seg = result["segments"]
+    lines = [
+        "Table 1. Sliced segments (true class = majority of points)",
+        f"  {'':14s}{'segments':>10s}{'with crop':>11s}{'no image':>10s}{'too small':>11s}",
+    ]
+    for name in ("guardrail", "other"):
+        crops = result["crops"]
+        lines.append(
+            f"  {name:14s}{seg[name]:>10d}{crops['ok'][name]:>11d}"
+            f"{crops['no_image'][name]:>10d}{crops['too_small'][name]:>11d}"
+        )
+    for title, key in (
+        ("Table 2. Classification, after label correction", "detection"),
+        ("Table 2 (raw). Classification, before label correction", "detection_raw"),
+    ):
+        lines += ["", title, f"  {'':14s}{'Recall':>9s}{'Precision':>11s}{'F-measure':>11s}"]
+        for name in ("guardrail", "other"):
+            m = result[key][name]
+            lines.append(
+                f"  {name:14s}{_pct(m['recall']):>9s}{_pct(m['precision']):>11s}{_pct(m['f1']):>11s}"
+            )
+    pts = result["points"]["guardrail"]
+    lines += [
+        "",
+        f"Guardrail points: recall {_pct(pts['recall'])}, precision {_pct(pts['precision'])} "
+        f"of {pts['n_true']} true guardrail points",
+    ]
+    return "\n".join(lines)
+
+
+def _pct(value: float) -> str:
+    return "n/a" if np.isnan(value) else f"{100 * value:.1f}%"

@@ -1,0 +1,147 @@
+"""Label correction (§3.3): labels of sliced segments are made to agree with their neighbours.
+
+An isolated guardrail segment becomes "other"; an "other" segment inside a run of guardrail
+segments becomes "guardrail". Neighbours are segments of the same or the next slice along the
+trajectory whose extents beside and above the road touch.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+
+@dataclass(frozen=True)
+class CorrectionParams:
+    """Rules of label correction."""
+
+    touch_distance_m: float = 0.3
+    """Segments whose lateral and height extents come within this many metres of each other, in
+    the same or adjacent slices, are neighbours."""
+    fill_margin_m: float = 0.05
+    """An other segment inside a run becomes guardrail only if it lies within the lateral and
+    height extent of its guardrail neighbours, widened by this many metres (so a curb or a
+    sidewalk beside a guardrail stays other)."""
+    min_run_slices: int = 2
+    """A group of neighbouring guardrail segments spanning fewer slices than this is isolated and
+    becomes other (the paper: an isolated segment)."""
+
+
+@dataclass(frozen=True)
+class SegmentExtents:
+    """Where each segment lies in track coordinates (see :mod:`guardrail_core.extract.track`).
+
+    Attributes
+    ----------
+    slice_index : (S,) int64, station slice of the segment
+    lateral : (S, 2) float64, metres, smallest and largest lateral offset of its points
+    height : (S, 2) float64, metres, lowest and highest point above the road
+    """
+
+    slice_index: np.ndarray
+    lateral: np.ndarray
+    height: np.ndarray
+
+
+def neighbour_pairs(
+    extents: SegmentExtents, params: CorrectionParams = CorrectionParams()
+) -> np.ndarray:
+    """Pairs (E, 2) int64 of neighbouring segments, each pair once, first in the lower slice.
+
+    Two segments are neighbours when their slices are equal or adjacent and both their lateral
+    and height intervals come within ``touch_distance_m``.
+    """
+    slice_index = np.asarray(extents.slice_index, np.int64)
+    if len(slice_index) == 0:
+        return np.zeros((0, 2), np.int64)
+    order = np.argsort(slice_index, kind="stable")
+    bounds = np.searchsorted(slice_index[order], np.unique(slice_index))
+    groups = dict(zip(np.unique(slice_index).tolist(), np.split(order, bounds[1:]), strict=True))
+    gap = params.touch_distance_m
+    pairs = []
+    for k, here in groups.items():
+        for other in (here, groups.get(k + 1)):
+            if other is None:
+                continue
+            a = np.repeat(here, len(other))
+            b = np.tile(other, len(here))
+            touch = (
+                (extents.lateral[a, 0] <= extents.lateral[b, 1] + gap)
+                & (extents.lateral[b, 0] <= extents.lateral[a, 1] + gap)
+                & (extents.height[a, 0] <= extents.height[b, 1] + gap)
+                & (extents.height[b, 0] <= extents.height[a, 1] + gap)
+            )
+            if other is here:
+                touch &= a < b
+            pairs.append(np.stack([a[touch], b[touch]], axis=1))
+    return np.concatenate(pairs).astype(np.int64)
+
+
+def correct_labels(
+    labels: np.ndarray, extents: SegmentExtents, params: CorrectionParams = CorrectionParams()
+) -> np.ndarray:
+    """Correct raw segment labels by their neighbours.
+
+    Parameters
+    ----------
+    labels : (S,) bool, raw labels (True: guardrail)
+    extents : where the segments lie
+    params : the rules
+
+    Returns
+    -------
+    (S,) bool, corrected labels.
+
+    References
+    ----------
+    Matsumoto et al. 2019, §3.3 (an isolated guardrail segment is regarded as other; other
+    segments among consecutive guardrail segments are regarded as guardrail).
+    """
+    labels = np.asarray(labels, bool).copy()
+    n = len(labels)
+    if n == 0:
+        return labels
+    slice_index = np.asarray(extents.slice_index, np.int64)
+    pairs = neighbour_pairs(extents, params)
+
+    # §3.3: an isolated guardrail segment becomes other.
+    both = labels[pairs[:, 0]] & labels[pairs[:, 1]]
+    run_pairs = pairs[both]
+    graph = coo_matrix(
+        (np.ones(len(run_pairs), np.int8), (run_pairs[:, 0], run_pairs[:, 1])), shape=(n, n)
+    )
+    _, run = connected_components(graph, directed=False)
+    guardrail = np.flatnonzero(labels)
+    first = np.full(n, np.iinfo(np.int64).max)
+    last = np.full(n, np.iinfo(np.int64).min)
+    np.minimum.at(first, run[guardrail], slice_index[guardrail])
+    np.maximum.at(last, run[guardrail], slice_index[guardrail])
+    span = last[run] - first[run] + 1
+    labels[guardrail[span[guardrail] < params.min_run_slices]] = False
+
+    # §3.3: an other segment inside a run becomes guardrail: it has guardrail neighbours in the
+    # slices before and after it and lies within their cross-section.
+    before = np.zeros(n, bool)
+    after = np.zeros(n, bool)
+    low = np.full((n, 2), np.inf)  # lowest lateral and height of the guardrail neighbours
+    high = np.full((n, 2), -np.inf)
+    lateral = np.asarray(extents.lateral, np.float64)
+    height = np.asarray(extents.height, np.float64)
+    for a, b in ((pairs[:, 0], pairs[:, 1]), (pairs[:, 1], pairs[:, 0])):
+        from_guardrail = labels[b]
+        a, b = a[from_guardrail], b[from_guardrail]
+        before[a[slice_index[b] < slice_index[a]]] = True
+        after[a[slice_index[b] > slice_index[a]]] = True
+        np.minimum.at(low, a, np.stack([lateral[b, 0], height[b, 0]], axis=1))
+        np.maximum.at(high, a, np.stack([lateral[b, 1], height[b, 1]], axis=1))
+    margin = params.fill_margin_m
+    within = (
+        (lateral[:, 0] >= low[:, 0] - margin)
+        & (lateral[:, 1] <= high[:, 0] + margin)
+        & (height[:, 0] >= low[:, 1] - margin)
+        & (height[:, 1] <= high[:, 1] + margin)
+    )
+    return labels | (before & after & within)

@@ -1,0 +1,135 @@
+"""Road removal (§3.1): drop road-surface points and points far from the road.
+
+A point is road surface when it lies at or below the road height estimated from the trajectory
+(within a tolerance for crown, grade and sidewalks) and its normal is close to vertical. Points
+beyond the road's edges by more than a margin, or high above the road, cannot be guardrails and go
+too: guardrails stand along the roadway.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from guardrail_core.extract.lattice import Lattice, lattice_normals
+from guardrail_core.extract.track import TrackCoordinates
+
+# Codes of :func:`remove_road`'s ``kept`` result for the points that are not kept.
+ROAD = 1
+OFF_ROAD = 2
+
+
+@dataclass(frozen=True)
+class RoadParams:
+    """Thresholds of road removal. Lengths in metres, angles in degrees.
+
+    The paper removes points "equal to or smaller than the estimated road height" with normals
+    "close to the Z axis"; it gives no numbers, so the tolerances here are ours.
+    """
+
+    height_tolerance_m: float = 0.25
+    """Road surface lies at most this far above the trajectory's road height (crown, grade,
+    sidewalks and verges at curb height). Guardrail rails start higher."""
+    max_normal_tilt_deg: float = 25.0
+    """Normals within this angle of vertical are ground."""
+    normal_neighbour_distance_m: float = 0.2
+    """Lattice neighbours farther than this lie on another surface (a rail above the sidewalk)
+    and are not used for normals."""
+    normal_phase_step: int = 4
+    """Normals span this many pulses either side along the scan line (a baseline of centimetres,
+    well above the range noise)."""
+    road_level_m: float = 0.08
+    """Ground points within this height of the road height mark the roadway, whose lateral
+    extent gives the road edges."""
+    edge_bin_m: float = 5.0
+    """Road edges are measured per stretch of this length along the trajectory."""
+    edge_margin_m: float = 5.0
+    """Points farther than this outside the road edges are removed as far from the road (keeps
+    the sidewalk and what stands along it, drops the buildings behind)."""
+    max_lateral_m: float = 15.0
+    """Hard limit on distance from the trajectory, and the road half-width assumed where a
+    stretch has no road points."""
+    max_height_m: float = 3.0
+    """Points higher than this above the road are removed (guardrails are about 1 m high)."""
+
+
+def remove_road(
+    xyz: np.ndarray,
+    track: TrackCoordinates,
+    lattice: Lattice,
+    params: RoadParams = RoadParams(),
+) -> np.ndarray:
+    """Classify points as kept, road surface or far from the road.
+
+    Parameters
+    ----------
+    xyz : (N, 3) float64, metres
+    track : the points' track coordinates (station, lateral, height above the road)
+    lattice : the points' scan lattice, for normals from lattice neighbours
+    params : thresholds
+
+    Returns
+    -------
+    (N,) uint8: 0 kept, :data:`ROAD` road surface, :data:`OFF_ROAD` far from the road.
+
+    References
+    ----------
+    Matsumoto et al. 2019, §3.1.
+    """
+    normals, valid = lattice_normals(
+        xyz,
+        lattice,
+        max_neighbour_distance_m=params.normal_neighbour_distance_m,
+        phase_step=params.normal_phase_step,
+    )
+    low = track.height <= params.height_tolerance_m
+    vertical = np.abs(normals[:, 2]) >= np.cos(np.deg2rad(params.max_normal_tilt_deg))
+    # A low point without a normal is a stray ground return: nothing above the ground is that
+    # isolated on the lattice.
+    road = low & (vertical | ~valid)
+
+    left_edge, right_edge = _road_edges(track, road, params)
+    far = (
+        (track.lateral > left_edge + params.edge_margin_m)
+        | (track.lateral < right_edge - params.edge_margin_m)
+        | (np.abs(track.lateral) > params.max_lateral_m)
+        | (track.height > params.max_height_m)
+    )
+    out = np.zeros(len(xyz), np.uint8)
+    out[far] = OFF_ROAD
+    out[road] = ROAD
+    return out
+
+
+def _road_edges(
+    track: TrackCoordinates, road: np.ndarray, params: RoadParams
+) -> tuple[np.ndarray, np.ndarray]:
+    """Left and right road edge (N,) in lateral metres at every point's station.
+
+    Per stretch of ``edge_bin_m`` the edges are the 1st and 99th percentiles of the lateral
+    positions of road-level ground points; stretches without any take their neighbours' edges.
+    """
+    n = len(track.station)
+    if n == 0:
+        return np.zeros(0), np.zeros(0)
+    level = road & (np.abs(track.height) <= params.road_level_m)
+    first = np.floor(track.station.min() / params.edge_bin_m)
+    bins = (np.floor(track.station / params.edge_bin_m) - first).astype(np.int64)
+    n_bins = int(bins.max()) + 1
+    left = np.full(n_bins, np.nan)
+    right = np.full(n_bins, np.nan)
+    lateral = track.lateral[level]
+    level_bins = bins[level]
+    order = np.argsort(level_bins, kind="stable")
+    starts = np.searchsorted(level_bins[order], np.arange(n_bins + 1))
+    for b in np.flatnonzero(np.diff(starts) >= 20):
+        values = lateral[order[starts[b] : starts[b + 1]]]
+        right[b], left[b] = np.percentile(values, [1, 99])
+    have = np.flatnonzero(~np.isnan(left))
+    if len(have) == 0:
+        return np.full(n, params.max_lateral_m), np.full(n, -params.max_lateral_m)
+    centres = np.arange(n_bins)
+    left = np.interp(centres, have, left[have])
+    right = np.interp(centres, have, right[have])
+    return left[bins], right[bins]

@@ -1,0 +1,109 @@
+"""Track coordinates: where a point lies along, beside and above the vehicle's trajectory.
+
+Road removal (§3.1) needs each point's height above the road, and slicing (§3.1) needs its station
+along the trajectory so that section planes stand perpendicular to it. Both come from projecting
+the point onto the trajectory's horizontal path, parametrised by arc length.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from guardrail_core.trajectory import Trajectory
+
+
+@dataclass(frozen=True)
+class TrackCoordinates:
+    """Points in the trajectory's frame.
+
+    Attributes
+    ----------
+    station : (N,) float64, metres along the trajectory's horizontal path from its first sample
+    lateral : (N,) float64, metres to the left of the path (negative: right)
+    height : (N,) float64, metres above the road surface estimated from the trajectory
+    """
+
+    station: np.ndarray
+    lateral: np.ndarray
+    height: np.ndarray
+
+
+def _path(
+    trajectory: Trajectory,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The trajectory's horizontal path parametrised by arc length.
+
+    Returns the arc length of every trajectory sample (M,), then arc length (K,), positions
+    (K, 2), unit tangents (K, 2) and road heights (K,) of the samples where the vehicle moved,
+    so that arc length strictly increases.
+    """
+    xy = trajectory.position[:, :2]
+    step = np.linalg.norm(np.diff(xy, axis=0), axis=1)
+    sample_arc = np.concatenate([[0.0], np.cumsum(step)])
+    keep = np.concatenate([[True], step > 1e-6])
+    road = trajectory.position[keep, 2] - trajectory.reference_height_m
+    if keep.sum() < 2:
+        # A vehicle that never moved: a straight path along its heading.
+        yaw = float(trajectory.attitude[0, 2])
+        direction = np.array([np.cos(yaw), np.sin(yaw)])
+        path_xy = np.stack([xy[0], xy[0] + direction])
+        return sample_arc, np.array([0.0, 1.0]), path_xy, np.stack([direction] * 2), road[[0, 0]]
+    arc = sample_arc[keep]
+    path_xy = xy[keep]
+    tangent = np.gradient(path_xy, arc, axis=0)
+    tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
+    return sample_arc, arc, path_xy, tangent, road
+
+
+def track_coordinates(
+    xyz: np.ndarray, gps_time: np.ndarray, trajectory: Trajectory, *, iterations: int = 4
+) -> TrackCoordinates:
+    """Project points onto the trajectory's path.
+
+    Parameters
+    ----------
+    xyz : (N, 3) float64, metres, local frame
+    gps_time : (N,) float64, seconds; the station of the vehicle when the point was scanned
+        starts the search, so a path that comes back near itself is not confused.
+    trajectory : the drive's trajectory
+    iterations : Newton steps of the projection; each moves the foot point along the local
+        tangent; four bring the station within millimetres.
+
+    Returns
+    -------
+    TrackCoordinates with (N,) station, lateral and height. Beyond the ends of the path the
+    station continues along the end tangents.
+
+    References
+    ----------
+    Matsumoto et al. 2019, §3.1 (road height from the trajectory; section planes perpendicular
+    to the trajectory).
+    """
+    xyz = np.asarray(xyz, np.float64)
+    sample_arc, arc, path_xy, tangent, road = _path(trajectory)
+    station = np.interp(np.asarray(gps_time, np.float64), trajectory.time, sample_arc)
+    x, y = xyz[:, 0], xyz[:, 1]
+    for _ in range(iterations):
+        foot_x, foot_y, tx, ty = _at(station, arc, path_xy, tangent)
+        station = station + (x - foot_x) * tx + (y - foot_y) * ty
+    foot_x, foot_y, tx, ty = _at(station, arc, path_xy, tangent)
+    lateral = tx * (y - foot_y) - ty * (x - foot_x)
+    height = xyz[:, 2] - np.interp(station, arc, road)
+    return TrackCoordinates(station=station, lateral=lateral, height=height)
+
+
+def _at(
+    station: np.ndarray, arc: np.ndarray, path_xy: np.ndarray, tangent: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Foot point (x, y) and unit tangent (tx, ty) at ``station``; straight beyond the ends."""
+    inside = np.clip(station, arc[0], arc[-1])
+    tx = np.interp(inside, arc, tangent[:, 0])
+    ty = np.interp(inside, arc, tangent[:, 1])
+    norm = np.hypot(tx, ty)
+    tx, ty = tx / norm, ty / norm
+    beyond = station - inside
+    foot_x = np.interp(inside, arc, path_xy[:, 0]) + beyond * tx
+    foot_y = np.interp(inside, arc, path_xy[:, 1]) + beyond * ty
+    return foot_x, foot_y, tx, ty
