@@ -33,15 +33,19 @@ class Lattice:
     def phases(self) -> int:
         return int(self.grid.shape[1])
 
-    def neighbour(self, d_rotation: int, d_phase: int) -> np.ndarray:
-        """(N,) int64 index of each point's neighbour at (+d_rotation, +d_phase); -1 where none.
+    def neighbour(
+        self, d_rotation: int, d_phase: int, points: np.ndarray | None = None
+    ) -> np.ndarray:
+        """Index of each point's neighbour at (+d_rotation, +d_phase); -1 where there is none.
 
-        A phase step past the end of a rotation continues on the next rotation, as the pulses do.
+        ``points`` (M,) int selects the points asked about (default: all N). A phase step past
+        the end of a rotation continues on the next rotation, as the pulses do.
         """
         rows, phases = self.grid.shape
-        target = self.cell + d_rotation * phases + d_phase
-        ok = (self.cell >= 0) & (target >= 0) & (target < rows * phases)
-        out = np.full(self.cell.shape, -1, np.int64)
+        cell = self.cell if points is None else self.cell[points]
+        target = cell + d_rotation * phases + d_phase
+        ok = (cell >= 0) & (target >= 0) & (target < rows * phases)
+        out = np.full(cell.shape, -1, np.int64)
         out[ok] = self.grid.ravel()[target[ok]]
         return out
 
@@ -73,7 +77,12 @@ def build_lattice(rotation: np.ndarray, phase: np.ndarray, points_per_rotation: 
 
 
 def lattice_normals(
-    xyz: np.ndarray, lattice: Lattice, *, max_neighbour_distance_m: float, phase_step: int = 4
+    xyz: np.ndarray,
+    lattice: Lattice,
+    *,
+    max_neighbour_distance_m: float,
+    phase_step: int = 4,
+    points: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Surface normals from lattice neighbours.
 
@@ -89,22 +98,26 @@ def lattice_normals(
         not used
     phase_step : k, pulses either side along the scan line. Adjacent pulses lie millimetres
         apart near the scanner, as close as the range noise, so a wider baseline is needed.
+    points : (M,) int, the points whose normals are wanted (default: all N)
 
     Returns
     -------
-    normals : (N, 3) float64 unit vectors (zeros where undefined)
-    valid : (N,) bool, whether the normal is defined (both directions had a neighbour)
+    normals : (M, 3) float64 unit vectors (zeros where undefined)
+    valid : (M,) bool, whether the normal is defined (both directions had a neighbour)
     """
     xyz = np.asarray(xyz, np.float64)
+    points = np.arange(len(xyz)) if points is None else np.asarray(points, np.int64)
+    own = xyz[points]
     max_sq = max_neighbour_distance_m**2
 
     def near(d_rotation: int, d_phase: int) -> np.ndarray:
-        index = lattice.neighbour(d_rotation, d_phase)
-        found = index >= 0
-        p = xyz.copy()
+        index = lattice.neighbour(d_rotation, d_phase, points)
+        p = own.copy()
+        found = np.flatnonzero(index >= 0)
         p[found] = xyz[index[found]]
-        too_far = np.einsum("ij,ij->i", p - xyz, p - xyz) > max_sq
-        p[too_far] = xyz[too_far]
+        delta = p - own
+        too_far = np.einsum("ij,ij->i", delta, delta) > max_sq
+        p[too_far] = own[too_far]
         return p
 
     along = near(0, phase_step) - near(0, -phase_step)

@@ -77,17 +77,20 @@ def remove_road(
     ----------
     Matsumoto et al. 2019, §3.1.
     """
+    # Normals are needed only where a point is low enough to be road surface.
+    low = np.flatnonzero(track.height <= params.height_tolerance_m)
     normals, valid = lattice_normals(
         xyz,
         lattice,
         max_neighbour_distance_m=params.normal_neighbour_distance_m,
         phase_step=params.normal_phase_step,
+        points=low,
     )
-    low = track.height <= params.height_tolerance_m
     vertical = np.abs(normals[:, 2]) >= np.cos(np.deg2rad(params.max_normal_tilt_deg))
+    road = np.zeros(len(track.height), bool)
     # A low point without a normal is a stray ground return: nothing above the ground is that
     # isolated on the lattice.
-    road = low & (vertical | ~valid)
+    road[low] = vertical | ~valid
 
     left_edge, right_edge = _road_edges(track, road, params)
     far = (

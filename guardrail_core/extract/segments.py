@@ -101,7 +101,7 @@ def wireframe_components(
     heads, tails = [], []
     source = np.flatnonzero(kept)
     for d_rotation, d_phase in offsets:
-        other = lattice.neighbour(d_rotation, d_phase)[source]
+        other = lattice.neighbour(d_rotation, d_phase, source)
         ok = other >= 0
         a, b = source[ok], other[ok]
         ok = kept[b]

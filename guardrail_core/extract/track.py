@@ -97,13 +97,20 @@ def track_coordinates(
 def _at(
     station: np.ndarray, arc: np.ndarray, path_xy: np.ndarray, tangent: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Foot point (x, y) and unit tangent (tx, ty) at ``station``; straight beyond the ends."""
+    """Foot point (x, y) and unit tangent (tx, ty) at ``station``; straight beyond the ends.
+
+    One binary search serves all four interpolations.
+    """
     inside = np.clip(station, arc[0], arc[-1])
-    tx = np.interp(inside, arc, tangent[:, 0])
-    ty = np.interp(inside, arc, tangent[:, 1])
+    upper = np.clip(np.searchsorted(arc, inside, side="right"), 1, len(arc) - 1)
+    lower = upper - 1
+    weight = (inside - arc[lower]) / (arc[upper] - arc[lower])
+    tx = tangent[lower, 0] + weight * (tangent[upper, 0] - tangent[lower, 0])
+    ty = tangent[lower, 1] + weight * (tangent[upper, 1] - tangent[lower, 1])
     norm = np.hypot(tx, ty)
-    tx, ty = tx / norm, ty / norm
+    tx /= norm
+    ty /= norm
     beyond = station - inside
-    foot_x = np.interp(inside, arc, path_xy[:, 0]) + beyond * tx
-    foot_y = np.interp(inside, arc, path_xy[:, 1]) + beyond * ty
+    foot_x = path_xy[lower, 0] + weight * (path_xy[upper, 0] - path_xy[lower, 0]) + beyond * tx
+    foot_y = path_xy[lower, 1] + weight * (path_xy[upper, 1] - path_xy[lower, 1]) + beyond * ty
     return foot_x, foot_y, tx, ty

