@@ -16,7 +16,7 @@ def test_help_lists_the_commands(capsys: pytest.CaptureFixture[str]) -> None:
         main(["--help"])
     assert exit_info.value.code == 0
     out = capsys.readouterr().out
-    for command in ("simulate", "info", "demo"):
+    for command in ("simulate", "info", "train", "process", "evaluate", "demo"):
         assert command in out
 
 

@@ -1,0 +1,106 @@
+"""The extraction commands: ``guardrail train``, ``process`` and ``evaluate``, and their errors."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import laspy
+import numpy as np
+import pytest
+
+from guardrail_core.cli import main
+
+
+def test_evaluate_prints_both_tables(
+    drive_path: Path, run_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["evaluate", str(drive_path), "--run", str(run_path)]) == 0
+    out = capsys.readouterr().out
+    assert "Table 1" in out and "Table 2. Classification, after label correction" in out
+    assert "before label correction" in out
+
+
+def test_evaluate_json_is_one_object_with_the_documented_keys(
+    drive_path: Path, run_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["evaluate", str(drive_path), "--run", str(run_path), "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    for block in ("detection", "detection_raw"):
+        for name in ("guardrail", "other"):
+            entry = result[block][name]
+            assert {"recall", "precision", "f1", "n_true"} <= set(entry)
+            assert 0.0 <= entry["f1"] <= 1.0
+    n_true = result["detection"]["guardrail"]["n_true"] + result["detection"]["other"]["n_true"]
+    assert n_true == result["segments"]["total"]
+
+
+def test_train_then_process_from_the_command_line(
+    drive_path: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    model = tmp_path / "model"
+    assert main(["train", str(drive_path), "--out", str(model), "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "trained a fast model" in out and "held out" in out
+    info = json.loads((model / "model.json").read_text())
+    assert info["trained_on"]["drives"][0]["drive"] == str(drive_path.resolve())
+    run = tmp_path / "run"
+    assert (
+        main(["process", str(drive_path), "--model", str(model), "--out", str(run), "--quiet"]) == 0
+    )
+    out = capsys.readouterr().out
+    assert "segments from" in out and "after label correction" in out
+    assert (run / "timings.json").is_file()
+
+
+def test_process_refuses_a_model_of_another_format_version(
+    drive_path: Path, model_path: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    model = tmp_path / "model"
+    shutil.copytree(model_path, model)
+    info = json.loads((model / "model.json").read_text())
+    info["format_version"] = 999
+    (model / "model.json").write_text(json.dumps(info))
+    run = tmp_path / "run"
+    code = main(["process", str(drive_path), "--model", str(model), "--out", str(run), "--quiet"])
+    assert code == 2
+    assert "IncompatibleModelError" in capsys.readouterr().err
+    assert not run.exists()
+
+
+def test_process_refuses_nan_coordinates(
+    drive_path: Path, model_path: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    copy = tmp_path / "drive"
+    shutil.copytree(drive_path, copy)
+    las = laspy.read(str(copy / "points.laz"))
+    times = np.array(las.gps_time)
+    times[5] = np.nan
+    las.gps_time = times
+    las.write(str(copy / "points.laz"))
+    run = tmp_path / "run"
+    code = main(["process", str(copy), "--model", str(model_path), "--out", str(run), "--quiet"])
+    assert code == 2
+    assert "NonFiniteCoordinatesError" in capsys.readouterr().err
+    assert not run.exists()
+
+
+def test_train_needs_truth(
+    drive_path: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    copy = tmp_path / "drive"
+    shutil.copytree(drive_path, copy)
+    shutil.rmtree(copy / "truth")
+    model = tmp_path / "model"
+    assert main(["train", str(copy), "--out", str(model), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "MissingDriveFileError" in err and "truth" in err
+    assert not model.exists()
+
+
+def test_evaluate_without_a_run_folder_is_a_named_error(
+    drive_path: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["evaluate", str(drive_path), "--run", str(tmp_path / "nothing")]) == 2
+    assert "RunFolderError" in capsys.readouterr().err
