@@ -13,6 +13,8 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from guardrail_core.errors import InvalidOptionError
+
 
 @dataclass(frozen=True)
 class CorrectionParams:
@@ -102,25 +104,17 @@ def correct_labels(
     """
     labels = np.asarray(labels, bool).copy()
     n = len(labels)
+    for name, array in (
+        ("slice_index", extents.slice_index),
+        ("lateral", extents.lateral),
+        ("height", extents.height),
+    ):
+        if len(array) != n:
+            raise InvalidOptionError(f"correct_labels: {n} labels but {len(array)} rows of {name}")
     if n == 0:
         return labels
     slice_index = np.asarray(extents.slice_index, np.int64)
     pairs = neighbour_pairs(extents, params)
-
-    # §3.3: an isolated guardrail segment becomes other.
-    both = labels[pairs[:, 0]] & labels[pairs[:, 1]]
-    run_pairs = pairs[both]
-    graph = coo_matrix(
-        (np.ones(len(run_pairs), np.int8), (run_pairs[:, 0], run_pairs[:, 1])), shape=(n, n)
-    )
-    _, run = connected_components(graph, directed=False)
-    guardrail = np.flatnonzero(labels)
-    first = np.full(n, np.iinfo(np.int64).max)
-    last = np.full(n, np.iinfo(np.int64).min)
-    np.minimum.at(first, run[guardrail], slice_index[guardrail])
-    np.maximum.at(last, run[guardrail], slice_index[guardrail])
-    span = last[run] - first[run] + 1
-    labels[guardrail[span[guardrail] < params.min_run_slices]] = False
 
     # §3.3: an other segment inside a run becomes guardrail: it has guardrail neighbours in the
     # slices before and after it and lies within their cross-section.
@@ -144,4 +138,21 @@ def correct_labels(
         & (height[:, 0] >= low[:, 1] - margin)
         & (height[:, 1] <= high[:, 1] + margin)
     )
-    return labels | (before & after & within)
+    labels |= before & after & within
+
+    # §3.3: an isolated guardrail segment becomes other. Holes are filled first, so that a
+    # misclassified segment next to a run's end does not leave the end segment isolated.
+    both = labels[pairs[:, 0]] & labels[pairs[:, 1]]
+    run_pairs = pairs[both]
+    graph = coo_matrix(
+        (np.ones(len(run_pairs), np.int8), (run_pairs[:, 0], run_pairs[:, 1])), shape=(n, n)
+    )
+    _, run = connected_components(graph, directed=False)
+    guardrail = np.flatnonzero(labels)
+    first = np.full(n, np.iinfo(np.int64).max)
+    last = np.full(n, np.iinfo(np.int64).min)
+    np.minimum.at(first, run[guardrail], slice_index[guardrail])
+    np.maximum.at(last, run[guardrail], slice_index[guardrail])
+    span = last[run] - first[run] + 1
+    labels[guardrail[span[guardrail] < params.min_run_slices]] = False
+    return labels

@@ -11,6 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from guardrail_core.errors import DriveDimensionError, DriveFormatError
+
 
 @dataclass(frozen=True)
 class Lattice:
@@ -64,6 +66,15 @@ def build_lattice(rotation: np.ndarray, phase: np.ndarray, points_per_rotation: 
     """
     rotation = np.asarray(rotation, np.int64)
     phase = np.asarray(phase, np.int64)
+    if rotation.shape != phase.shape or rotation.ndim != 1:
+        raise DriveDimensionError(
+            f"scan lattice: rotation {rotation.shape} and phase {phase.shape} must be (N,) each"
+        )
+    if len(phase) and (phase.min() < 0 or phase.max() >= points_per_rotation):
+        raise DriveFormatError(
+            f"scan lattice: phases must lie in 0..{points_per_rotation - 1} (the scanner's points "
+            f"per rotation), got {phase.min()}..{phase.max()}"
+        )
     if len(rotation) == 0:
         return Lattice(np.full((1, points_per_rotation), -1, np.int32), 0, np.zeros(0, np.int64))
     first = int(rotation.min())

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from guardrail_core.errors import InvalidOptionError
 from guardrail_core.extract.lattice import Lattice, lattice_normals
 from guardrail_core.extract.track import TrackCoordinates
 
@@ -77,6 +78,12 @@ def remove_road(
     ----------
     Matsumoto et al. 2019, §3.1.
     """
+    n = len(xyz)
+    lengths = {len(track.station), len(track.lateral), len(track.height), len(lattice.cell)}
+    if lengths != {n}:
+        raise InvalidOptionError(
+            f"remove_road: {n} points but track coordinates and lattice of lengths {sorted(lengths)}"
+        )
     # Normals are needed only where a point is low enough to be road surface.
     low = np.flatnonzero(track.height <= params.height_tolerance_m)
     normals, valid = lattice_normals(

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from guardrail_core.errors import InvalidOptionError
 from guardrail_core.trajectory import Trajectory
 
 
@@ -36,8 +37,8 @@ def _path(
     """The trajectory's horizontal path parametrised by arc length.
 
     Returns the arc length of every trajectory sample (M,), then arc length (K,), positions
-    (K, 2), unit tangents (K, 2) and road heights (K,) of the samples where the vehicle moved,
-    so that arc length strictly increases.
+    (K, 2), unit tangents (K, 2), signed curvature (K,) 1/m (positive turning left) and road
+    heights (K,) of the samples where the vehicle moved, so that arc length strictly increases.
     """
     xy = trajectory.position[:, :2]
     step = np.linalg.norm(np.diff(xy, axis=0), axis=1)
@@ -49,12 +50,14 @@ def _path(
         yaw = float(trajectory.attitude[0, 2])
         direction = np.array([np.cos(yaw), np.sin(yaw)])
         path_xy = np.stack([xy[0], xy[0] + direction])
-        return sample_arc, np.array([0.0, 1.0]), path_xy, np.stack([direction] * 2), road[[0, 0]]
+        tangent = np.stack([direction] * 2)
+        return sample_arc, np.array([0.0, 1.0]), path_xy, tangent, np.zeros(2), road[[0, 0]]
     arc = sample_arc[keep]
     path_xy = xy[keep]
     tangent = np.gradient(path_xy, arc, axis=0)
     tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
-    return sample_arc, arc, path_xy, tangent, road
+    curvature = np.gradient(np.unwrap(np.arctan2(tangent[:, 1], tangent[:, 0])), arc)
+    return sample_arc, arc, path_xy, tangent, curvature, road
 
 
 def track_coordinates(
@@ -82,12 +85,22 @@ def track_coordinates(
     to the trajectory).
     """
     xyz = np.asarray(xyz, np.float64)
-    sample_arc, arc, path_xy, tangent, road = _path(trajectory)
-    station = np.interp(np.asarray(gps_time, np.float64), trajectory.time, sample_arc)
+    gps_time = np.asarray(gps_time, np.float64)
+    if xyz.ndim != 2 or xyz.shape[1] != 3 or gps_time.shape != (len(xyz),):
+        raise InvalidOptionError(
+            f"track_coordinates: expected xyz (N, 3) and gps_time (N,), got {xyz.shape} and "
+            f"{gps_time.shape}"
+        )
+    sample_arc, arc, path_xy, tangent, curvature, road = _path(trajectory)
+    station = np.interp(gps_time, trajectory.time, sample_arc)
     x, y = xyz[:, 0], xyz[:, 1]
     for _ in range(iterations):
         foot_x, foot_y, tx, ty = _at(station, arc, path_xy, tangent)
-        station = station + (x - foot_x) * tx + (y - foot_y) * ty
+        # Newton step: on a curve the foot point moves 1 / (1 - curvature * lateral) times as
+        # fast as the point's tangential offset.
+        lateral = tx * (y - foot_y) - ty * (x - foot_x)
+        bend = 1.0 - np.interp(np.clip(station, arc[0], arc[-1]), arc, curvature) * lateral
+        station = station + ((x - foot_x) * tx + (y - foot_y) * ty) / np.maximum(bend, 0.2)
     foot_x, foot_y, tx, ty = _at(station, arc, path_xy, tangent)
     lateral = tx * (y - foot_y) - ty * (x - foot_x)
     height = xyz[:, 2] - np.interp(station, arc, road)

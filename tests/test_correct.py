@@ -1,0 +1,214 @@
+"""Label correction (§3.3): segment labels made to agree with their neighbours."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from guardrail_core.errors import GuardrailError
+from guardrail_core.extract.correct import (
+    CorrectionParams,
+    SegmentExtents,
+    correct_labels,
+    neighbour_pairs,
+)
+
+#: A guardrail beam's cross-section beside the road: lateral and height extents (metres).
+BEAM = (2.0, 2.1, 0.3, 1.0)
+#: A curb just inside the guardrail: 10 cm away laterally (within the touch distance).
+CURB = (1.7, 1.9, 0.0, 0.13)
+
+
+def extents(*segments: tuple[int, tuple[float, float, float, float]]) -> SegmentExtents:
+    """Extents from (slice, (lateral lo, lateral hi, height lo, height hi)) per segment."""
+    if not segments:
+        return SegmentExtents(np.zeros(0, np.int64), np.zeros((0, 2)), np.zeros((0, 2)))
+    slices = np.array([s for s, _ in segments], np.int64)
+    box = np.array([b for _, b in segments], np.float64)
+    return SegmentExtents(slices, box[:, :2], box[:, 2:])
+
+
+def run(slices, box=BEAM) -> list[tuple[int, tuple[float, float, float, float]]]:
+    return [(s, box) for s in slices]
+
+
+def test_an_other_segment_inside_a_run_becomes_guardrail() -> None:
+    labels = np.ones(10, bool)
+    labels[4] = False
+    corrected = correct_labels(labels, extents(*run(range(10))))
+    assert corrected.dtype == bool
+    np.testing.assert_array_equal(corrected, np.ones(10, bool))
+
+
+def test_a_lone_guardrail_segment_becomes_other() -> None:
+    """Alone, and among other segments that touch it: a run of one slice is isolated."""
+    np.testing.assert_array_equal(correct_labels(np.array([True]), extents((3, BEAM))), [False])
+    labels = np.array([False, False, True, False, False])
+    corrected = correct_labels(labels, extents(*run(range(5))))
+    np.testing.assert_array_equal(corrected, np.zeros(5, bool))
+
+
+def test_two_guardrail_segments_in_adjacent_slices_stay() -> None:
+    corrected = correct_labels(np.array([True, True]), extents(*run([7, 8])))
+    np.testing.assert_array_equal(corrected, [True, True])
+
+
+def test_two_guardrail_segments_of_one_slice_are_isolated() -> None:
+    """A pipe and a beam cut from the same slice span one slice: fewer than min_run_slices."""
+    pipe = (2.0, 2.1, 0.9, 1.0)
+    beam = (2.0, 2.1, 0.4, 0.7)
+    corrected = correct_labels(np.array([True, True]), extents((5, pipe), (5, beam)))
+    np.testing.assert_array_equal(corrected, [False, False])
+
+
+def test_guardrail_segments_that_do_not_touch_are_isolated() -> None:
+    """Adjacent slices, but 1 m apart across the road (farther than touch_distance_m)."""
+    far = (3.1, 3.2, 0.3, 1.0)
+    corrected = correct_labels(np.array([True, True]), extents((0, BEAM), (1, far)))
+    np.testing.assert_array_equal(corrected, [False, False])
+
+
+def test_min_run_slices_comes_from_the_params() -> None:
+    params = CorrectionParams(min_run_slices=3)
+    two = correct_labels(np.ones(2, bool), extents(*run([0, 1])), params)
+    three = correct_labels(np.ones(3, bool), extents(*run([0, 1, 2])), params)
+    np.testing.assert_array_equal(two, [False, False])
+    np.testing.assert_array_equal(three, [True, True, True])
+
+
+def test_a_curb_beside_the_run_stays_other() -> None:
+    """The curb in slice 4 touches the guardrail segments around it but lies outside their
+    cross-section (lateral 1.7 < 2.0 - fill_margin_m), so it stays other; the guardrail
+    segment of slice 4, labelled other too, is filled."""
+    segments = run(range(10)) + [(4, CURB)]
+    labels = np.ones(11, bool)
+    labels[[4, 10]] = False
+    ext = extents(*segments)
+    pairs = {tuple(p) for p in neighbour_pairs(ext).tolist()}
+    assert {(3, 10), (4, 10), (10, 5)} <= pairs  # the curb is the run's neighbour
+
+    corrected = correct_labels(labels, ext)
+
+    expected = np.ones(11, bool)
+    expected[10] = False
+    np.testing.assert_array_equal(corrected, expected)
+
+
+def test_a_segment_slightly_wider_than_the_run_within_the_margin_is_filled() -> None:
+    wider = (1.96, 2.14, 0.27, 1.04)  # 4 cm beyond the run on every side: within 5 cm
+    segments = run(range(4)) + [(4, wider)] + run(range(5, 10))
+    labels = np.ones(10, bool)
+    labels[4] = False
+    np.testing.assert_array_equal(correct_labels(labels, extents(*segments)), np.ones(10, bool))
+
+
+def test_a_segment_at_the_end_of_a_run_stays_other() -> None:
+    """Other segments at slices 10 and -1 have guardrail neighbours on one side only."""
+    segments = run(range(10)) + [(10, BEAM), (-1, BEAM)]
+    labels = np.ones(12, bool)
+    labels[[10, 11]] = False
+    expected = labels.copy()
+    np.testing.assert_array_equal(correct_labels(labels, extents(*segments)), expected)
+
+
+def test_a_gap_between_runs_on_different_sides_is_not_filled() -> None:
+    """A guardrail on the left up to slice 3 and one on the right from slice 5: the other
+    segment of slice 4 on the left has guardrail neighbours before it only."""
+    right = (-2.1, -2.0, 0.3, 1.0)
+    segments = run(range(4)) + [(4, BEAM)] + run(range(5, 10), right)
+    labels = np.ones(10, bool)
+    labels[4] = False
+    np.testing.assert_array_equal(correct_labels(labels, extents(*segments)), labels)
+
+
+def test_empty_input_returns_empty() -> None:
+    corrected = correct_labels(np.zeros(0, bool), extents())
+    assert corrected.shape == (0,) and corrected.dtype == bool
+    assert neighbour_pairs(extents()).shape == (0, 2)
+
+
+def test_labels_are_not_modified_in_place() -> None:
+    labels = np.array([True, True, True, False, True, True])  # a lone one and a hole
+    before = labels.copy()
+    segments = [(0, BEAM)] + run(range(5, 10))
+    corrected = correct_labels(labels, extents(*segments))
+    np.testing.assert_array_equal(labels, before)
+    assert corrected is not labels
+    np.testing.assert_array_equal(corrected, [False, True, True, True, True, True])
+
+
+@pytest.mark.parametrize("hole", [1, 8])
+def test_a_hole_next_to_the_end_of_a_run_is_filled(hole: int) -> None:
+    """The same single misclassification that is filled at slice 4 is filled one slice from
+    either end of the run too, and does not cost the run its end segment."""
+    labels = np.ones(10, bool)
+    labels[hole] = False
+    corrected = correct_labels(labels, extents(*run(range(10))))
+    np.testing.assert_array_equal(corrected, np.ones(10, bool))
+
+
+@pytest.mark.parametrize(("gap", "touch"), [(0.29, True), (0.31, False)])
+def test_touch_distance(gap: float, touch: bool) -> None:
+    """Lateral gap of ``gap`` metres between two segments of adjacent slices; the height
+    intervals 0.29 m apart touch in both cases."""
+    a = (2.0, 2.1, 0.3, 1.0)
+    b = (2.1 + gap, 2.5 + gap, 1.29, 1.5)
+    pairs = neighbour_pairs(extents((0, a), (1, b)))
+    assert pairs.tolist() == ([[0, 1]] if touch else [])
+    assert pairs.dtype == np.int64
+
+
+def random_extents(seed: int, n: int = 120) -> tuple[np.ndarray, SegmentExtents]:
+    """Segments over 15 slices, 0-3 per slice on average, scattered beside the road."""
+    rng = np.random.default_rng(seed)
+    slices = rng.integers(-3, 12, n)
+    lo = np.column_stack([rng.uniform(-4.0, 4.0, n), rng.uniform(-0.5, 1.5, n)])
+    size = rng.uniform(0.05, 0.6, (n, 2))
+    labels = rng.random(n) < 0.6
+    return labels, SegmentExtents(
+        slices,
+        np.column_stack([lo[:, 0], lo[:, 0] + size[:, 0]]),
+        np.column_stack([lo[:, 1], lo[:, 1] + size[:, 1]]),
+    )
+
+
+@pytest.mark.parametrize("seed", [50, 51])
+def test_neighbour_pairs_equal_a_brute_force_search(seed: int) -> None:
+    _, ext = random_extents(seed)
+    gap = CorrectionParams().touch_distance_m
+    pairs = neighbour_pairs(ext)
+
+    expected = set()
+    n = len(ext.slice_index)
+    for i in range(n):
+        for j in range(n):
+            if i == j or not 0 <= ext.slice_index[j] - ext.slice_index[i] <= 1:
+                continue
+            if ext.slice_index[i] == ext.slice_index[j] and j < i:
+                continue
+            if (
+                ext.lateral[i, 0] <= ext.lateral[j, 1] + gap
+                and ext.lateral[j, 0] <= ext.lateral[i, 1] + gap
+                and ext.height[i, 0] <= ext.height[j, 1] + gap
+                and ext.height[j, 0] <= ext.height[i, 1] + gap
+            ):
+                expected.add((i, j))
+    got = [tuple(p) for p in pairs.tolist()]
+    assert len(got) == len(set(got))  # each pair once
+    assert set(got) == expected
+    assert len(expected) > 20  # the fixture has neighbours to find
+
+
+@pytest.mark.parametrize("seed", [52, 53])
+def test_correction_does_not_depend_on_segment_order(seed: int) -> None:
+    labels, ext = random_extents(seed)
+    corrected = correct_labels(labels, ext)
+    order = np.random.default_rng(seed).permutation(len(labels))
+    shuffled = SegmentExtents(ext.slice_index[order], ext.lateral[order], ext.height[order])
+    np.testing.assert_array_equal(correct_labels(labels[order], shuffled), corrected[order])
+    assert (corrected != labels).any()  # the fixture exercises the rules
+
+
+def test_labels_and_extents_of_different_lengths_is_a_named_error() -> None:
+    with pytest.raises(GuardrailError):
+        correct_labels(np.ones(5, bool), extents(*run(range(3))))

@@ -1,0 +1,320 @@
+"""Sliced segments (§3.1): lattice wireframe components, 0.5 m slices and their summaries."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from guardrail_core.extract.lattice import build_lattice
+from guardrail_core.extract.segments import (
+    SegmentParams,
+    Segments,
+    slice_components,
+    summarise_segments,
+    wireframe_components,
+)
+
+#: The thresholds these scenes are built around (the defaults at the time of writing).
+PARAMS = SegmentParams(
+    link_distance_m=0.3, along_reach=3, rotation_reach=2, phase_reach=4, slice_length_m=0.5
+)
+
+
+def test_default_slices_are_the_papers_half_metre() -> None:
+    assert SegmentParams().slice_length_m == 0.5
+
+
+class LatticeScene:
+    """A full (rotation, phase) grid of background points, not kept, placed 50 m below
+    everything (so they could link to nothing), into which objects are written."""
+
+    def __init__(self, rotations: int, phases: int, rng: np.random.Generator) -> None:
+        self.phases = phases
+        r, p = np.meshgrid(np.arange(rotations), np.arange(phases), indexing="ij")
+        self.rotation, self.phase = r.ravel(), p.ravel()
+        self.xyz = rng.uniform(-100.0, 100.0, (len(self.rotation), 3))
+        self.xyz[:, 2] -= 150.0
+        self.kept = np.zeros(len(self.rotation), bool)
+        self.present = np.ones(len(self.rotation), bool)
+        self.object = np.full(len(self.rotation), -1)
+
+    def cells(self, rotation: np.ndarray, phase: np.ndarray) -> np.ndarray:
+        return np.asarray(rotation) * self.phases + np.asarray(phase)
+
+    def put(self, name: int, rotation, phase, xyz) -> None:
+        cell = self.cells(rotation, phase)
+        self.xyz[cell] = xyz
+        self.kept[cell] = True
+        self.object[cell] = name
+
+    def build(self, rng: np.random.Generator):
+        """Points present, in random order: xyz, kept, object, rotation, phase, lattice."""
+        index = rng.permutation(np.flatnonzero(self.present))
+        rotation, phase = self.rotation[index], self.phase[index]
+        lattice = build_lattice(rotation, phase, self.phases)
+        return self.xyz[index], self.kept[index], self.object[index], rotation, phase, lattice
+
+
+def rail(scene: LatticeScene, name: int, rotations, phases, *, y: float, spacing=0.1) -> None:
+    """A horizontal rail: on every given rotation (x = spacing * r) a short vertical profile
+    of 5 cm steps at lateral y, one point per given phase."""
+    r, k = np.meshgrid(np.asarray(rotations), np.arange(len(phases)), indexing="ij")
+    r, k = r.ravel(), k.ravel()
+    xyz = np.column_stack([spacing * r + 0.05, np.full(len(r), y), 0.5 + 0.05 * k])
+    scene.put(name, r, np.asarray(phases)[k], xyz)
+
+
+def same_partition(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether two labelings group the points identically (up to renumbering)."""
+    pairs = np.unique(np.stack([a, b], axis=1), axis=0)
+    return len(pairs) == len(np.unique(a)) == len(np.unique(b))
+
+
+def test_two_rails_beside_each_other_are_two_components() -> None:
+    """Two rails 1 m apart whose pulses are lattice neighbours (phases 8-10 and 11-13, within
+    phase_reach) are two components; the background points are not kept and get -1."""
+    rng = np.random.default_rng(30)
+    scene = LatticeScene(100, 20, rng)
+    rail(scene, 0, range(100), [8, 9, 10], y=2.0)
+    rail(scene, 1, range(100), [11, 12, 13], y=3.0)
+    xyz, kept, obj, _, _, lattice = scene.build(rng)
+
+    component = wireframe_components(xyz, kept, lattice, PARAMS)
+
+    assert component.dtype == np.int32 and component.shape == (len(xyz),)
+    assert (component[~kept] == -1).all()
+    assert set(np.unique(component[kept]).tolist()) == {0, 1}
+    assert same_partition(component[kept], obj[kept])
+    # Numbered in order of each component's first point.
+    assert component[np.flatnonzero(kept)[0]] == 0
+
+
+@pytest.mark.parametrize(("shift", "expected"), [(0.2, 1), (0.5, 2)])
+def test_a_jump_beyond_the_link_distance_splits(shift: float, expected: int) -> None:
+    """A rail that steps sideways by ``shift`` halfway: 0.1 m between scan lines and a 0.2 m
+    step are within 0.3 m; a 0.5 m step is not."""
+    rng = np.random.default_rng(31)
+    scene = LatticeScene(60, 12, rng)
+    rail(scene, 0, range(30), [4, 5, 6], y=2.0)
+    rail(scene, 1, range(30, 60), [4, 5, 6], y=2.0 + shift)
+    xyz, kept, obj, _, _, lattice = scene.build(rng)
+
+    component = wireframe_components(xyz, kept, lattice, PARAMS)
+
+    assert len(np.unique(component[kept])) == expected
+    if expected == 2:
+        assert same_partition(component[kept], obj[kept])
+
+
+@pytest.mark.parametrize(("missing", "expected"), [((), 1), ((20,), 1), ((20, 21), 2)])
+@pytest.mark.parametrize("how", ["absent", "not kept"])
+def test_missing_scan_lines_are_bridged_up_to_rotation_reach(
+    missing: tuple[int, ...], expected: int, how: str
+) -> None:
+    """Scan lines 5 cm apart: one missing line is bridged (rotation_reach=2); two are not,
+    though the 15 cm across them is within the link distance."""
+    rng = np.random.default_rng(32)
+    scene = LatticeScene(40, 10, rng)
+    rail(scene, 0, range(40), [3, 4, 5], y=2.0, spacing=0.05)
+    gone = np.isin(scene.rotation, missing)
+    if how == "absent":
+        scene.present[gone] = False
+    else:
+        scene.kept[gone] = False
+    xyz, kept, _, _, _, lattice = scene.build(rng)
+
+    component = wireframe_components(xyz, kept, lattice, PARAMS)
+
+    assert len(np.unique(component[kept])) == expected
+
+
+@pytest.mark.parametrize(
+    ("dropped", "expected"), [((), 1), ((15,), 1), ((15, 16), 1), ((15, 16, 17), 2)]
+)
+@pytest.mark.parametrize("how", ["absent", "not kept"])
+def test_dropped_pulses_are_bridged_up_to_along_reach(
+    dropped: tuple[int, ...], expected: int, how: str
+) -> None:
+    """A post scanned by one scan line, pulses 5 cm apart: up to two dropped pulses in a row
+    are bridged (along_reach=3), three are not, though 20 cm is within the link distance."""
+    rng = np.random.default_rng(33)
+    scene = LatticeScene(1, 30, rng)
+    phase = np.arange(30)
+    scene.put(
+        0, np.zeros(30, int), phase, np.column_stack([np.zeros(30), np.zeros(30), 0.05 * phase])
+    )
+    gone = np.isin(scene.phase, dropped)
+    if how == "absent":
+        scene.present[gone] = False
+    else:
+        scene.kept[gone] = False
+    xyz, kept, _, _, phase, lattice = scene.build(rng)
+
+    component = wireframe_components(xyz, kept, lattice, PARAMS)
+
+    assert len(np.unique(component[kept])) == expected
+    if expected == 2:
+        assert same_partition(component[kept], (phase[kept] > 15).astype(int))
+
+
+def brute_force_components(
+    xyz: np.ndarray, kept: np.ndarray, rotation: np.ndarray, phase: np.ndarray, phases: int
+) -> np.ndarray:
+    """Components from every pair of kept points whose flat lattice cells differ by one of the
+    wireframe's window offsets and that lie closer than the link distance."""
+    offsets = {d for d in range(1, PARAMS.along_reach + 1)} | {
+        r * phases + d
+        for r in range(1, PARAMS.rotation_reach + 1)
+        for d in range(-PARAMS.phase_reach, PARAMS.phase_reach + 1)
+    }
+    cell = rotation * phases + phase
+    idx = np.flatnonzero(kept)
+    i, j = np.meshgrid(idx, idx, indexing="ij")
+    i, j = i.ravel(), j.ravel()
+    linked = np.isin(np.abs(cell[j] - cell[i]), list(offsets))
+    linked &= np.linalg.norm(xyz[i] - xyz[j], axis=1) < PARAMS.link_distance_m
+    n = len(xyz)
+    graph = coo_matrix((np.ones(linked.sum()), (i[linked], j[linked])), shape=(n, n))
+    return connected_components(graph, directed=False)[1]
+
+
+def test_components_equal_a_brute_force_wireframe() -> None:
+    """Jittered points, some cells empty, some points not kept: the components are those of
+    the wireframe built pair by pair, numbered in order of their first point."""
+    rng = np.random.default_rng(34)
+    rotations, phases = 24, 20
+    r, p = np.meshgrid(np.arange(rotations), np.arange(phases), indexing="ij")
+    r, p = r.ravel(), p.ravel()
+    present = rng.random(len(r)) > 0.1
+    r, p = r[present], p[present]
+    order = rng.permutation(len(r))
+    r, p = r[order], p[order]
+    xyz = np.column_stack([0.1 * r, 0.05 * p, np.zeros(len(r))]) + rng.normal(0, 0.25, (len(r), 3))
+    kept = rng.random(len(r)) > 0.2
+
+    component = wireframe_components(xyz, kept, build_lattice(r, p, phases), PARAMS)
+    truth = brute_force_components(xyz, kept, r, p, phases)
+
+    assert (component[~kept] == -1).all()
+    assert same_partition(component[kept], truth[kept])
+    sizes = np.unique(truth[kept], return_counts=True)[1]
+    n_components = len(sizes)
+    # The fixture is neither one blob nor dust: many components of several points.
+    assert (sizes > 1).sum() >= 10 and sizes.max() < 0.8 * kept.sum()
+    _, first = np.unique(component[kept], return_index=True)
+    np.testing.assert_array_equal(component[kept][np.sort(first)], np.arange(n_components))
+
+
+def test_nothing_kept() -> None:
+    rng = np.random.default_rng(35)
+    scene = LatticeScene(5, 6, rng)
+    xyz, kept, _, _, _, lattice = scene.build(rng)
+    component = wireframe_components(xyz, kept, lattice, PARAMS)
+    np.testing.assert_array_equal(component, -1)
+
+    segments = slice_components(component, xyz[:, 0], PARAMS)
+    assert len(segments) == 0
+    assert (segments.point_segment == -1).all() and len(segments.point_segment) == len(xyz)
+    np.testing.assert_array_equal(segments.starts, [0])
+    summary = summarise_segments(xyz, np.zeros(len(xyz)), xyz[:, 1], xyz[:, 2], segments)
+    assert summary.centroid.shape == (0, 3) and summary.bbox_min.shape == (0, 3)
+    assert summary.lateral.shape == summary.height.shape == summary.time.shape == (0, 2)
+
+
+def test_a_ten_metre_rail_is_twenty_slices() -> None:
+    """Two rails of 100 scan lines at x = 0.05 + 0.1 r (10 m), three pulses per line: 20 slices
+    each, 5 scan lines x 3 pulses = 15 points per segment, ids ordered by slice then rail."""
+    rng = np.random.default_rng(36)
+    scene = LatticeScene(100, 20, rng)
+    rail(scene, 0, range(100), [8, 9, 10], y=2.0)
+    rail(scene, 1, range(100), [11, 12, 13], y=3.0)
+    xyz, kept, obj, _, _, lattice = scene.build(rng)
+    component = wireframe_components(xyz, kept, lattice, PARAMS)
+
+    segments = slice_components(component, xyz[:, 0], PARAMS)
+
+    assert isinstance(segments, Segments)
+    assert len(segments) == 40
+    np.testing.assert_array_equal(segments.n_points, 15)
+    np.testing.assert_array_equal(segments.slice_index, np.repeat(np.arange(20), 2))
+    np.testing.assert_array_equal(segments.component, np.tile([0, 1], 20))
+    for s in range(40):
+        members = segments.members(s)
+        assert len(np.unique(obj[members])) == 1
+        assert (np.floor(xyz[members, 0] / 0.5) == segments.slice_index[s]).all()
+
+
+def test_slices_are_half_open_and_continue_below_zero() -> None:
+    station = np.array([0.0, 0.4999, 0.5, 1.0, -0.0001, -0.5, -0.50001])
+    segments = slice_components(np.zeros(7, np.int64), station, PARAMS)
+    np.testing.assert_array_equal(segments.slice_index, [-2, -1, 0, 1, 2])
+    np.testing.assert_array_equal(segments.point_segment, [2, 2, 3, 4, 1, 1, 0])
+
+
+def random_segments(seed: int, n: int = 3000) -> tuple[np.ndarray, np.ndarray, Segments]:
+    """Random components (-1: not kept; sparse numbers) and stations, including negative."""
+    rng = np.random.default_rng(seed)
+    component = rng.choice([-1, 0, 1, 2, 5, 9], n)
+    station = rng.uniform(-3.0, 7.0, n)
+    return component, station, slice_components(component, station, PARAMS)
+
+
+@pytest.mark.parametrize("seed", [37, 38])
+def test_every_kept_point_is_in_exactly_one_segment(seed: int) -> None:
+    component, station, segments = random_segments(seed)
+    kept = np.flatnonzero(component >= 0)
+    n = len(segments)
+
+    assert segments.point_segment.dtype == np.int32
+    np.testing.assert_array_equal(segments.point_segment >= 0, component >= 0)
+    np.testing.assert_array_equal(segments.point_component, component)
+    members = np.concatenate([segments.members(s) for s in range(n)])
+    np.testing.assert_array_equal(np.sort(members), kept)  # a permutation of the kept points
+    assert segments.n_points.sum() == len(kept)
+    np.testing.assert_array_equal(segments.n_points, np.bincount(segments.point_segment[kept]))
+    np.testing.assert_array_equal(np.diff(segments.starts), segments.n_points)
+    assert segments.starts[0] == 0 and segments.starts[-1] == len(kept)
+    # One segment per (slice, component) pair present, ids in order of slice then component.
+    slices = np.floor(station[kept] / 0.5).astype(int)
+    pairs = set(zip(slices.tolist(), component[kept].tolist(), strict=True))
+    assert len(pairs) == n
+    keys = list(zip(segments.slice_index.tolist(), segments.component.tolist(), strict=True))
+    assert keys == sorted(pairs)
+    for s in range(n):
+        m = segments.members(s)
+        assert (segments.point_segment[m] == s).all()
+        assert (component[m] == segments.component[s]).all()
+        assert (station[m] >= 0.5 * segments.slice_index[s]).all()
+        assert (station[m] < 0.5 * (segments.slice_index[s] + 1)).all()
+
+
+def test_summary_equals_a_per_segment_computation() -> None:
+    component, station, segments = random_segments(39)
+    rng = np.random.default_rng(40)
+    n = len(component)
+    xyz = rng.normal(0.0, 10.0, (n, 3)) + np.array([5e5, 4e6, 30.0])  # big map coordinates
+    gps_time = rng.uniform(1e9, 1e9 + 100.0, n)
+    lateral, height = rng.uniform(-15, 15, n), rng.uniform(-1, 3, n)
+
+    summary = summarise_segments(xyz, gps_time, lateral, height, segments)
+
+    for s in range(len(segments)):
+        m = segments.members(s)
+        np.testing.assert_allclose(summary.centroid[s], xyz[m].mean(axis=0), rtol=1e-15, atol=0)
+        np.testing.assert_array_equal(summary.bbox_min[s], xyz[m].min(axis=0))
+        np.testing.assert_array_equal(summary.bbox_max[s], xyz[m].max(axis=0))
+        np.testing.assert_array_equal(summary.lateral[s], [lateral[m].min(), lateral[m].max()])
+        np.testing.assert_array_equal(summary.height[s], [height[m].min(), height[m].max()])
+        np.testing.assert_array_equal(summary.time[s], [gps_time[m].min(), gps_time[m].max()])
+
+
+def test_summary_centroids_to_a_picometre_near_the_origin() -> None:
+    component, _, segments = random_segments(41)
+    rng = np.random.default_rng(42)
+    xyz = rng.uniform(-20.0, 20.0, (len(component), 3))
+    zeros = np.zeros(len(component))
+    summary = summarise_segments(xyz, zeros, zeros, zeros, segments)
+    expected = np.array([xyz[segments.members(s)].mean(axis=0) for s in range(len(segments))])
+    np.testing.assert_allclose(summary.centroid, expected, rtol=0, atol=1e-12)
