@@ -33,7 +33,7 @@ class TrackCoordinates:
 
 def _path(
     trajectory: Trajectory,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The trajectory's horizontal path parametrised by arc length.
 
     Returns the arc length of every trajectory sample (M,), then arc length (K,), positions
