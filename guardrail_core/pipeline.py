@@ -15,6 +15,7 @@ from tqdm import tqdm
 
 from guardrail_core.drive import Drive, atomic_folder, commit_folder
 from guardrail_core.errors import EmptyDriveError
+from guardrail_core.extract.classify import EMBEDDING_DIM, GuardrailClassifier
 from guardrail_core.extract.correct import CorrectionParams, SegmentExtents, correct_labels
 from guardrail_core.extract.crops import (
     CROP_OK,
@@ -151,7 +152,7 @@ def extract(
 
 def process_drive(
     drive: Drive,
-    model: Any,
+    model: GuardrailClassifier,
     out: Path,
     *,
     params: ExtractionParams = ExtractionParams(),
@@ -163,7 +164,7 @@ def process_drive(
     Parameters
     ----------
     drive : the drive
-    model : a :class:`guardrail_core.extract.classify.GuardrailClassifier`
+    model : the trained classifier
     out : the run folder to write; written whole or not at all
     params : extraction parameters
     overwrite : replace an existing run folder
@@ -191,7 +192,7 @@ def process_drive(
             embeddings = None
             if len(ok):
                 if model.mode == "fast":
-                    embeddings = np.zeros((len(segments), 1280), np.float32)
+                    embeddings = np.zeros((len(segments), EMBEDDING_DIM), np.float32)
                     embeddings[ok] = model.embed(result.crops[ok], progress=progress)
                     probability[ok] = model.predict_proba(embeddings=embeddings[ok])
                 else:
@@ -236,7 +237,6 @@ def process_drive(
                 "model": {
                     "version": model.version,
                     "mode": model.mode,
-                    "path": str(Path(getattr(model, "path", "") or "")),
                     "threshold": model.threshold,
                 },
                 "params": params.to_json(),
