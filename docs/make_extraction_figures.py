@@ -28,7 +28,14 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from make_figures import draw_legend, eye_dome, look_at, put_label, splat, write_png  # noqa: E402
+from make_figures import (  # noqa: E402
+    draw_legend,
+    eye_dome,
+    overview_pose,
+    put_label,
+    splat,
+    write_png,
+)
 
 from guardrail_core.drive import Drive, load_drive  # noqa: E402
 from guardrail_core.evaluate import segment_truth  # noqa: E402
@@ -61,15 +68,7 @@ def make_segments(drive: Drive, run: Run, out: Path, size: tuple[int, int] = (14
     inside = seg >= 0
     rgb[inside] = colour[seg[inside]]
 
-    traj = drive.trajectory
-    t_mid = traj.time[0] + 0.38 * (traj.time[-1] - traj.time[0])
-    pos, _ = traj.interpolate(np.array([t_mid]))
-    ahead, _ = traj.interpolate(np.array([t_mid + 1.0]))
-    pos, ahead = pos[0], ahead[0]
-    heading = (ahead - pos) / np.linalg.norm(ahead - pos)
-    side = np.cross([0.0, 0.0, 1.0], heading)
-    eye = pos - 14.0 * heading + 3.0 * side + np.array([0, 0, 11.0])
-    pose = look_at(eye, pos + 16.0 * heading + np.array([0, 0, -1.0]))
+    eye, pose = overview_pose(drive)
     xyz = drive.points.xyz
     near = np.linalg.norm(xyz[:, :2] - eye[:2], axis=1) < 90.0
     image, depth = splat(

@@ -330,10 +330,10 @@ def eye_dome(image: np.ndarray, depth: np.ndarray, strength: float = 0.7) -> np.
     return out.clip(0, 255).astype(np.uint8)
 
 
-def make_point_cloud(drive: Drive, out: Path, size: tuple[int, int] = (1400, 800)) -> None:
-    assert drive.truth is not None
+def overview_pose(drive: Drive) -> tuple[np.ndarray, np.ndarray]:
+    """Eye (3,) and T_world_camera (4, 4) of the overview: a stretch a little past the middle
+    of the drive, seen from above and behind."""
     traj = drive.trajectory
-    # A stretch a little past the middle of the drive, seen from above and behind.
     t_mid = traj.time[0] + 0.38 * (traj.time[-1] - traj.time[0])
     pos, _ = traj.interpolate(np.array([t_mid]))
     ahead, _ = traj.interpolate(np.array([t_mid + 1.0]))
@@ -341,8 +341,12 @@ def make_point_cloud(drive: Drive, out: Path, size: tuple[int, int] = (1400, 800
     heading = (ahead - pos) / np.linalg.norm(ahead - pos)
     side = np.cross([0.0, 0.0, 1.0], heading)
     eye = pos - 14.0 * heading + 3.0 * side + np.array([0, 0, 11.0])
-    target = pos + 16.0 * heading + np.array([0, 0, -1.0])
-    pose = look_at(eye, target)
+    return eye, look_at(eye, pos + 16.0 * heading + np.array([0, 0, -1.0]))
+
+
+def make_point_cloud(drive: Drive, out: Path, size: tuple[int, int] = (1400, 800)) -> None:
+    assert drive.truth is not None
+    eye, pose = overview_pose(drive)
 
     xyz = drive.points.xyz
     near = np.linalg.norm(xyz[:, :2] - eye[:2], axis=1) < 90.0
