@@ -31,10 +31,12 @@ from guardrail_core.extract.segments import (
     SegmentParams,
     Segments,
     SegmentSummary,
+    absorb_fragments,
     slice_components,
     summarise_segments,
     wireframe_components,
 )
+from guardrail_core.extract.shape_features import segment_features
 from guardrail_core.extract.track import track_coordinates
 from guardrail_core.run_folder import POINT_OFF_ROAD, POINT_ROAD, crop_name, write_run_files
 from guardrail_core.timing import StageTimer
@@ -62,6 +64,8 @@ class Extraction:
     point_segment : (N,) int32, segment of every point, POINT_ROAD or POINT_OFF_ROAD
     segments : the sliced segments
     summary : their extents
+    features : (S, SEGMENT_FEATURE_DIM) float32, shape and neighbour features
+        (:mod:`guardrail_core.extract.shape_features`)
     choice : chosen image and rectangle per segment
     crops : (S, size, size, 3) uint8 RGB, black where there is no crop
     """
@@ -69,20 +73,26 @@ class Extraction:
     point_segment: np.ndarray
     segments: Segments
     summary: SegmentSummary
+    features: np.ndarray
     choice: CropChoice
     crops: np.ndarray
 
     def extents(self) -> SegmentExtents:
-        return SegmentExtents(self.segments.slice_index, self.summary.lateral, self.summary.height)
+        return segment_extents(self.segments, self.summary)
+
+
+def segment_extents(segments: Segments, summary: SegmentSummary) -> SegmentExtents:
+    return SegmentExtents(segments.slice_index, summary.lateral, summary.height)
 
 
 def slice_drive(
     drive: Drive, params: ExtractionParams = ExtractionParams(), *, timer: StageTimer | None = None
-) -> tuple[np.ndarray, Segments, SegmentSummary]:
-    """The geometric stages of §3.1: road removal, wireframe components, 0.5 m slices.
+) -> tuple[np.ndarray, Segments, SegmentSummary, np.ndarray]:
+    """The geometric stages of §3.1: road removal, wireframe components (fragments joined to
+    their neighbours), 0.5 m slices, and the segments' shape features.
 
-    Returns ``point_segment`` (N,) int32 (segment, POINT_ROAD or POINT_OFF_ROAD), the segments
-    and their summary.
+    Returns ``point_segment`` (N,) int32 (segment, POINT_ROAD or POINT_OFF_ROAD), the segments,
+    their summary and their (S, SEGMENT_FEATURE_DIM) float32 features.
 
     Raises
     ------
@@ -103,15 +113,27 @@ def slice_drive(
         kept = status == 0
     with timer.stage("components", points=int(kept.sum())):
         component = wireframe_components(points.xyz, kept, lattice, params.segments)
+        component = absorb_fragments(points.xyz, component, params.segments)
     with timer.stage("slices", points=int(kept.sum())):
         segments = slice_components(component, track.station, params.segments)
         summary = summarise_segments(
             points.xyz, points.gps_time, track.lateral, track.height, segments
         )
+    with timer.stage("features", points=int(kept.sum())):
+        features = segment_features(
+            track.station,
+            track.lateral,
+            track.height,
+            points.intensity,
+            segments,
+            segment_extents(segments, summary),
+            params.segments.slice_length_m,
+            params.correction,
+        )
     point_segment = segments.point_segment.copy()
     point_segment[status == ROAD] = POINT_ROAD
     point_segment[status == OFF_ROAD] = POINT_OFF_ROAD
-    return point_segment, segments, summary
+    return point_segment, segments, summary, features
 
 
 def extract(
@@ -124,7 +146,7 @@ def extract(
 ) -> Extraction:
     """Slice a drive (§3.1) and crop every segment's image (§3.2) at ``crop_size`` pixels."""
     timer = timer or StageTimer(len(drive.points))
-    point_segment, segments, summary = slice_drive(drive, params, timer=timer)
+    point_segment, segments, summary, features = slice_drive(drive, params, timer=timer)
     with timer.stage("crops", points=int(segments.n_points.sum())):
         with tqdm(
             total=len(drive.images), desc="choosing images", unit="image", disable=not progress
@@ -147,7 +169,7 @@ def extract(
                 params.crops,
                 progress=bar.update,
             )
-    return Extraction(point_segment, segments, summary, choice, crops)
+    return Extraction(point_segment, segments, summary, features, choice, crops)
 
 
 def process_drive(
@@ -187,16 +209,17 @@ def process_drive(
         segments, choice = result.segments, result.choice
         ok = np.flatnonzero(choice.status == CROP_OK)
 
-        with timer.stage("classify", points=len(ok)):
-            probability = np.full(len(segments), np.nan, np.float32)
+        with timer.stage("classify", points=len(segments)):
+            crop_probability = np.full(len(segments), np.nan, np.float64)
             embeddings = None
             if len(ok):
                 if model.mode == "fast":
                     embeddings = np.zeros((len(segments), EMBEDDING_DIM), np.float32)
                     embeddings[ok] = model.embed(result.crops[ok], progress=progress)
-                    probability[ok] = model.predict_proba(embeddings=embeddings[ok])
+                    crop_probability[ok] = model.predict_proba(embeddings=embeddings[ok])
                 else:
-                    probability[ok] = model.predict_proba(result.crops[ok], progress=progress)
+                    crop_probability[ok] = model.predict_proba(result.crops[ok], progress=progress)
+            probability = model.segment_proba(result.features, crop_probability)
             raw_label = np.nan_to_num(probability, nan=0.0) >= model.threshold
 
         with timer.stage("correction", points=len(segments)):
@@ -224,7 +247,9 @@ def process_drive(
                 "image": choice.image,
                 "rect": choice.rect,
                 "crop_status": choice.status,
-                "probability": probability,
+                "crop_probability": crop_probability.astype(np.float32),
+                "probability": probability.astype(np.float32),
+                "features": result.features,
                 "raw_label": raw_label,
                 "label": label,
             }

@@ -24,8 +24,9 @@ from typing import Any
 import numpy as np
 
 from guardrail_core.errors import RunFolderError
+from guardrail_core.extract.shape_features import SEGMENT_FEATURE_DIM
 
-RUN_FORMAT_VERSION = 1
+RUN_FORMAT_VERSION = 2  # 2: segments fused from shape and crop (features, crop_probability)
 POINT_ROAD = -1
 POINT_OFF_ROAD = -2
 
@@ -43,6 +44,8 @@ SEGMENT_FIELDS: dict[str, tuple[str, tuple[int, ...]]] = {
     "image": ("int64", ()),
     "rect": ("int32", (4,)),
     "crop_status": ("uint8", ()),
+    "crop_probability": ("float32", ()),
+    "features": ("float32", (SEGMENT_FEATURE_DIM,)),
     "probability": ("float32", ()),
     "raw_label": ("bool", ()),
     "label": ("bool", ()),
@@ -121,10 +124,11 @@ def _write_csv(path: Path, segments: dict[str, np.ndarray], image_files: list[st
         writer = csv.writer(f)
         writer.writerow(
             ["segment", "n_points", "x", "y", "z", "slice_index", "crop_status", "image"]
-            + ["x0", "y0", "x1", "y1", "probability", "raw_label", "label"]
+            + ["x0", "y0", "x1", "y1", "crop_probability", "probability", "raw_label", "label"]
         )
         for s in range(len(segments["n_points"])):
             image = int(segments["image"][s])
+            crop_probability = float(segments["crop_probability"][s])
             probability = float(segments["probability"][s])
             writer.writerow(
                 [s, int(segments["n_points"][s])]
@@ -133,6 +137,7 @@ def _write_csv(path: Path, segments: dict[str, np.ndarray], image_files: list[st
                 + [CROP_STATUS_NAMES[int(segments["crop_status"][s])]]
                 + [image_files[image] if image >= 0 else ""]
                 + [int(v) for v in segments["rect"][s]]
+                + ["" if np.isnan(crop_probability) else f"{crop_probability:.4f}"]
                 + ["" if np.isnan(probability) else f"{probability:.4f}"]
                 + ["guardrail" if segments["raw_label"][s] else "other"]
                 + ["guardrail" if segments["label"][s] else "other"]

@@ -1,19 +1,33 @@
-"""Training sets of labelled crops from drives, and training a classifier from them (§3.3)."""
+"""Training sets of labelled segments from drives, and training a model from them (§3.3)."""
 
 from __future__ import annotations
 
+import dataclasses
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass
+from datetime import datetime
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from tqdm import tqdm
 
 from guardrail_core.drive import load_drive
 from guardrail_core.errors import MissingDriveFileError, TrainingDataError
 from guardrail_core.evaluate import segment_truth
-from guardrail_core.extract.classify import ClassifierParams, GuardrailClassifier, train_classifier
+from guardrail_core.extract.classify import (
+    ClassifierParams,
+    GuardrailClassifier,
+    classification_metrics,
+    embed_crops,
+    held_out_mask,
+    model_version,
+    train_classifier,
+)
 from guardrail_core.extract.crops import CROP_OK
+from guardrail_core.extract.segment_head import SegmentHeadParams, fit_segment_head
+from guardrail_core.extract.shape_features import SEGMENT_FEATURE_NAMES
 from guardrail_core.pipeline import ExtractionParams, extract
 
 # Held-out metrics are measured on whole blocks of this many slices (10 m), so that neighbouring
@@ -23,30 +37,34 @@ HOLD_OUT_BLOCK_SLICES = 20
 
 @dataclass(frozen=True)
 class TrainingSet:
-    """Labelled crops.
+    """Labelled segments of drives, with their crops.
 
     Attributes
     ----------
-    crops : (K, S, S, 3) uint8 RGB
-    labels : (K,) bool, True for guardrail
-    groups : (K,) int64, spatial block of each crop (for a held-out split)
+    features : (S, SEGMENT_FEATURE_DIM) float32, shape and neighbour features of every segment
+    labels : (S,) bool, True for guardrail
+    groups : (S,) int64, spatial block of each segment (for held-out splits and folds)
+    has_crop : (S,) bool, the segment has a crop
+    crops : (K, C, C, 3) uint8 RGB, the crops of the segments with one, in segment order
     sources : per drive: its path and its counts
     """
 
-    crops: np.ndarray
+    features: np.ndarray
     labels: np.ndarray
     groups: np.ndarray
+    has_crop: np.ndarray
+    crops: np.ndarray
     sources: list[dict[str, Any]]
 
 
-def labelled_crops(
+def labelled_segments(
     drive_paths: Sequence[Path],
     crop_size: int,
     params: ExtractionParams = ExtractionParams(),
     *,
     progress: bool = False,
 ) -> TrainingSet:
-    """Extract every drive's segments and label their crops from ``truth/``.
+    """Extract every drive's segments and label them from ``truth/``.
 
     A segment is guardrail when most of its points are (the same rule as the evaluation).
 
@@ -55,7 +73,8 @@ def labelled_crops(
     MissingDriveFileError
         A drive has no truth/ folder.
     """
-    crops, labels, groups, sources = [], [], [], []
+    parts: dict[str, list[np.ndarray]] = {k: [] for k in ("features", "labels", "groups", "crop")}
+    crops, sources = [], []
     for index, path in enumerate(drive_paths):
         drive = load_drive(path)
         if drive.truth is None:
@@ -64,24 +83,30 @@ def labelled_crops(
             )
         result = extract(drive, crop_size, params, progress=progress)
         truth = segment_truth(drive.truth.point_class, result.point_segment, len(result.segments))
-        ok = np.flatnonzero(result.choice.status == CROP_OK)
-        crops.append(result.crops[ok])
-        labels.append(truth[ok])
-        block = result.segments.slice_index[ok] // HOLD_OUT_BLOCK_SLICES
-        groups.append(index * 1_000_000 + block - block.min(initial=0))
+        has_crop = result.choice.status == CROP_OK
+        block = result.segments.slice_index // HOLD_OUT_BLOCK_SLICES
+        parts["features"].append(result.features)
+        parts["labels"].append(truth)
+        parts["groups"].append(index * 1_000_000 + block - block.min(initial=0))
+        parts["crop"].append(has_crop)
+        crops.append(result.crops[has_crop])
         sources.append(
             {
                 "drive": str(Path(path).resolve()),
                 "segments": len(result.segments),
-                "crops": len(ok),
-                "guardrail": int(truth[ok].sum()),
-                "other": int((~truth[ok]).sum()),
+                "crops": int(has_crop.sum()),
+                "guardrail": int(truth.sum()),
+                "other": int((~truth).sum()),
             }
         )
+    if not sources:
+        raise TrainingDataError("no drives given to train on")
     return TrainingSet(
-        crops=np.concatenate(crops) if crops else np.zeros((0, crop_size, crop_size, 3), np.uint8),
-        labels=np.concatenate(labels) if labels else np.zeros(0, bool),
-        groups=np.concatenate(groups).astype(np.int64) if groups else np.zeros(0, np.int64),
+        features=np.concatenate(parts["features"]),
+        labels=np.concatenate(parts["labels"]),
+        groups=np.concatenate(parts["groups"]).astype(np.int64),
+        has_crop=np.concatenate(parts["crop"]),
+        crops=np.concatenate(crops),
         sources=sources,
     )
 
@@ -90,31 +115,120 @@ def train_from_drives(
     drive_paths: Sequence[Path],
     *,
     params: ClassifierParams = ClassifierParams(),
+    head: SegmentHeadParams = SegmentHeadParams(),
     extraction: ExtractionParams = ExtractionParams(),
     progress: bool = False,
 ) -> GuardrailClassifier:
-    """Train a classifier on the crops of labelled drives.
+    """Train the crop classifier and the segment head on labelled drives.
+
+    1. The crop classifier on every crop (:func:`train_classifier`; its held-out figures go to
+       ``info["metrics"]["held_out_crops"]``).
+    2. Out-of-fold crop probabilities: the blocks are dealt into ``head.folds`` folds and each
+       fold's crops are classified by a crop classifier trained on the other folds (in full mode
+       that is ``head.folds`` more fine-tunings).
+    3. The segment head on every segment, from its features and its out-of-fold crop
+       probability; measured first on held-out blocks (``info["metrics"]["held_out"]``, every
+       segment, with or without a crop), then refit on all.
 
     Raises
     ------
     TrainingDataError
-        The drives yield too few crops, or crops of one class only.
+        The drives yield too few crops, or segments or crops of one class only.
     """
     if not drive_paths:
         raise TrainingDataError("no drives given to train on")
-    data = labelled_crops(drive_paths, params.input_size, extraction, progress=progress)
+    data = labelled_segments(drive_paths, params.input_size, extraction, progress=progress)
+    crop_rows = np.flatnonzero(data.has_crop)
     trained_on = {
         "drives": data.sources,
-        "crops": len(data.labels),
+        "segments": len(data.labels),
+        "crops": len(crop_rows),
         "guardrail": int(data.labels.sum()),
         "other": int((~data.labels).sum()),
         "labels": "truth",
     }
-    return train_classifier(
+    embeddings = None
+    if params.mode == "fast" and len(crop_rows):
+        embeddings = embed_crops(data.crops, progress=progress)
+    model = train_classifier(
         data.crops,
-        data.labels,
-        groups=data.groups,
+        data.labels[crop_rows],
+        groups=data.groups[crop_rows],
+        embeddings=embeddings,
         params=params,
         trained_on=trained_on,
         progress=progress,
     )
+    clock = time.perf_counter()
+    crop_proba, missing_folds = _out_of_fold_crop_proba(
+        data, embeddings, params, head.folds, progress=progress
+    )
+    rng = np.random.default_rng(params.seed)
+    held = held_out_mask(data.labels, data.groups, params.held_out_fraction, rng)
+    held_out = None
+    if held.any():
+        measured = fit_segment_head(
+            data.features[~held], crop_proba[~held], data.labels[~held], head, seed=params.seed
+        )
+        predicted = measured.proba(data.features[held], crop_proba[held]) > params.threshold
+        held_out = classification_metrics(data.labels[held], predicted)
+        held_out.pop("n")
+        held_out.update(
+            n_train=int((~held).sum()),
+            n_held_out=int(held.sum()),
+            n_groups_held_out=int(len(np.unique(data.groups[held]))),
+            threshold=params.threshold,
+        )
+    model.segment_head = fit_segment_head(
+        data.features, crop_proba, data.labels, head, seed=params.seed
+    )
+    info = model.info
+    info["metrics"] = {"held_out": held_out, "held_out_crops": info["metrics"]["held_out"]}
+    info["segment_head"] = {
+        "features": list(SEGMENT_FEATURE_NAMES),
+        "params": head.to_json(),
+        "folds_without_crop_classifier": missing_folds,
+        "seconds": round(time.perf_counter() - clock, 2),
+    }
+    info["version"] = model_version(datetime.fromisoformat(info["created"]), model.weights())
+    return model
+
+
+def _out_of_fold_crop_proba(
+    data: TrainingSet,
+    embeddings: np.ndarray | None,
+    params: ClassifierParams,
+    folds: int,
+    *,
+    progress: bool,
+) -> tuple[np.ndarray, int]:
+    """(S,) crop P(guardrail) of every segment from a classifier that did not see its block's
+    crops (NaN without a crop), and the number of folds whose other folds held too few crops of
+    each class to train on (their crops count as without a crop)."""
+    proba = np.full(len(data.labels), np.nan)
+    crop_rows = np.flatnonzero(data.has_crop)
+    blocks = np.unique(data.groups)
+    fold_of_block = np.random.default_rng(params.seed).permutation(len(blocks)) % folds
+    fold = fold_of_block[np.searchsorted(blocks, data.groups[crop_rows])]
+    fold_params = dataclasses.replace(params, held_out_fraction=0.0)
+    labels = data.labels[crop_rows]
+    missing = 0
+    for k in tqdm(range(folds), desc="crop folds", unit="fold", disable=not progress):
+        train, test = np.flatnonzero(fold != k), np.flatnonzero(fold == k)
+        if len(test) == 0:
+            continue
+        try:
+            model = train_classifier(
+                data.crops[train] if embeddings is None else None,  # fast: no copy of crops
+                labels[train],
+                embeddings=None if embeddings is None else embeddings[train],
+                params=fold_params,
+            )
+        except TrainingDataError:
+            missing += 1
+            continue
+        if embeddings is not None:
+            proba[crop_rows[test]] = model.predict_proba(embeddings=embeddings[test])
+        else:
+            proba[crop_rows[test]] = model.predict_proba(data.crops[test])
+    return proba, missing

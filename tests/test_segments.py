@@ -11,6 +11,7 @@ from guardrail_core.extract.lattice import build_lattice
 from guardrail_core.extract.segments import (
     SegmentParams,
     Segments,
+    absorb_fragments,
     slice_components,
     summarise_segments,
     wireframe_components,
@@ -318,3 +319,52 @@ def test_summary_centroids_to_a_picometre_near_the_origin() -> None:
     summary = summarise_segments(xyz, zeros, zeros, zeros, segments)
     expected = np.array([xyz[segments.members(s)].mean(axis=0) for s in range(len(segments))])
     np.testing.assert_allclose(summary.centroid, expected, rtol=0, atol=1e-12)
+
+
+def test_fragments_join_the_nearest_large_component_within_reach() -> None:
+    params = SegmentParams(fragment_points=10, fragment_reach_m=0.3)
+    # Component 0: a rail of 40 points along x at y = 0; component 1: a rail at y = 1 m.
+    # Fragment 2 lies 0.2 m from rail 0; fragment 3 lies 0.25 m from rail 1 and 0.75 m from
+    # rail 0; fragment 4 is 0.5 m from everything; points of 5 are not kept.
+    x = np.linspace(0.0, 3.9, 40)
+    rail_0 = np.stack([x, np.zeros(40), np.zeros(40)], axis=1)
+    rail_1 = np.stack([x, np.ones(40), np.zeros(40)], axis=1)
+    fragment_2 = np.array([[1.0, 0.2, 0.0], [1.05, 0.3, 0.0]])
+    fragment_3 = np.array([[2.0, 0.75, 0.0], [2.0, 0.7, 0.05], [2.05, 0.6, 0.1]])
+    fragment_4 = np.array([[6.0, 0.5, 0.0]])
+    not_kept = np.array([[1.0, 0.1, 0.0]])
+    xyz = np.concatenate([rail_0, rail_1, fragment_2, fragment_3, fragment_4, not_kept])
+    component = np.repeat([0, 1, 2, 3, 4, -1], [40, 40, 2, 3, 1, 1])
+    merged = absorb_fragments(xyz, component, params)
+    expected = np.repeat([0, 1, 0, 1, 2, -1], [40, 40, 2, 3, 1, 1])
+    np.testing.assert_array_equal(merged, expected)
+    assert merged.dtype == np.int32
+
+
+def test_a_fragment_goes_whole_to_the_component_its_closest_point_reaches() -> None:
+    params = SegmentParams(fragment_points=5, fragment_reach_m=0.3)
+    a = np.stack([np.linspace(0, 1, 10), np.zeros(10), np.zeros(10)], axis=1)
+    b = a + [0.0, 0.5, 0.0]
+    # One point 0.2 m from a, one 0.1 m from b: the whole fragment goes to b.
+    fragment = np.array([[0.5, 0.2, 0.0], [0.5, 0.4, 0.0]])
+    component = np.repeat([0, 1, 2], [10, 10, 2])
+    merged = absorb_fragments(np.concatenate([a, b, fragment]), component, params)
+    np.testing.assert_array_equal(merged[20:], [1, 1])
+
+
+@pytest.mark.parametrize("reach", [0.0, 0.1])
+def test_no_reach_or_nothing_near_leaves_components_as_they_are(reach: float) -> None:
+    params = SegmentParams(fragment_points=10, fragment_reach_m=reach)
+    rail = np.stack([np.linspace(0, 2, 20), np.zeros(20), np.zeros(20)], axis=1)
+    fragment = np.array([[1.0, 0.2, 0.0]])
+    component = np.repeat([0, 1], [20, 1])
+    merged = absorb_fragments(np.concatenate([rail, fragment]), component, params)
+    np.testing.assert_array_equal(merged, component)
+
+
+def test_fragments_with_nothing_large_or_nothing_kept() -> None:
+    xyz = np.zeros((3, 3))
+    np.testing.assert_array_equal(
+        absorb_fragments(xyz, np.array([0, 1, 2])), [0, 1, 2]
+    )  # all small: nothing to join
+    np.testing.assert_array_equal(absorb_fragments(xyz, np.full(3, -1)), [-1, -1, -1])

@@ -30,7 +30,6 @@ import math
 import threading
 import time
 from collections.abc import Iterator
-from contextlib import contextmanager
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -47,6 +46,8 @@ from guardrail_core.errors import (
     ModelFormatError,
     TrainingDataError,
 )
+from guardrail_core.extract.segment_head import SegmentHead
+from guardrail_core.extract.torch_threads import one_thread
 
 __all__ = [
     "ARCHITECTURE",
@@ -67,6 +68,7 @@ CLASS_NAMES = ("other", "guardrail")
 ARCHITECTURE = "efficientnet-lite0"
 #: Length of a crop embedding: channels of EfficientNet-Lite0's last feature map.
 EMBEDDING_DIM = 1280
+SEGMENT_PREFIX = "segment."  # names of the segment head's arrays in weights.npz
 #: Lite models take ``(rgb - PIXEL_MEAN) / PIXEL_SCALE``.
 PIXEL_MEAN = 127.0
 PIXEL_SCALE = 128.0
@@ -354,21 +356,6 @@ def _batches(n: int, batch_size: int, *, progress: bool, desc: str) -> Iterator[
             bar.update(stop - start)
 
 
-@contextmanager
-def _one_thread() -> Iterator[None]:
-    """Run torch on one thread inside the block (restored after).
-
-    The head's tensors are tiny: with two threads torch spends its time synchronising them, up to
-    70x slower than one thread when another process shares the cores.
-    """
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(before)
-
-
 def _pooled_features(net: nn.Module, x: torch.Tensor) -> torch.Tensor:
     """(B, 3, S, S) -> (B, 1280): global average of the last feature map."""
     return net.extract_features(x).mean(dim=(2, 3))  # type: ignore[operator]
@@ -430,13 +417,22 @@ def weights_digest(weights: dict[str, np.ndarray]) -> str:
     return digest.hexdigest()
 
 
-class GuardrailClassifier:
-    """A trained crop classifier: P(guardrail) for (N, S, S, 3) uint8 crops (§3.3).
+def model_version(created: datetime, weights: dict[str, np.ndarray]) -> str:
+    """``<UTC creation time YYYYmmddTHHMMSS>-<8 hex of the weights' sha256>``."""
+    return f"{created:%Y%m%dT%H%M%S}-{weights_digest(weights)[:8]}"
 
-    Made by :func:`train_classifier` or :func:`guardrail_core.extract.model_store.load_model`.
+
+class GuardrailClassifier:
+    """A trained crop classifier: P(guardrail) for (N, S, S, 3) uint8 crops (§3.3), and, when
+    trained from drives, a segment head that fuses it with the segments' shape.
+
+    Made by :func:`train_classifier` (crops alone),
+    :func:`guardrail_core.training.train_from_drives` (with the segment head) or
+    :func:`guardrail_core.extract.model_store.load_model`.
 
     Attributes
     ----------
+    segment_head : SegmentHead or None, see :meth:`segment_proba`
     info : dict
         Everything :func:`~guardrail_core.extract.model_store.save_model` writes to ``model.json``
         except ``format_version`` (which belongs to the store): architecture, mode, input_size,
@@ -452,8 +448,10 @@ class GuardrailClassifier:
         head: nn.Module | None = None,
         feature_mean: np.ndarray | None = None,
         feature_scale: np.ndarray | None = None,
+        segment_head: SegmentHead | None = None,
     ) -> None:
         self.info = info
+        self.segment_head = segment_head
         self._net = net
         self._head = head
         self._feature_mean = feature_mean
@@ -550,6 +548,17 @@ class GuardrailClassifier:
                 out[sl] = torch.softmax(self._net(_to_input(crops[sl])), dim=1)[:, 1].numpy()
         return out
 
+    def segment_proba(self, features: np.ndarray, crop_proba: np.ndarray) -> np.ndarray:
+        """(S,) float64 P(guardrail) of whole segments.
+
+        With a segment head: from the segments' shape and neighbour features (S, F) and their crop
+        probabilities (S,), NaN where a segment has no crop; every segment gets an answer.
+        Without one (a crop classifier alone): the crop probabilities as given, NaN included.
+        """
+        if self.segment_head is None:
+            return np.asarray(crop_proba, np.float64).copy()
+        return self.segment_head.proba(features, crop_proba)
+
     def predict(
         self,
         crops: np.ndarray | None = None,
@@ -564,7 +573,7 @@ class GuardrailClassifier:
         assert self._head is not None and self._feature_mean is not None  # set for fast models
         assert self._feature_scale is not None
         z = (embeddings - self._feature_mean) / self._feature_scale
-        with torch.inference_mode(), _one_thread():
+        with torch.inference_mode(), one_thread():
             logits = self._head(torch.from_numpy(np.ascontiguousarray(z, np.float32)))
             return torch.softmax(logits, dim=1)[:, 1].numpy().astype(np.float64)
 
@@ -576,14 +585,16 @@ class GuardrailClassifier:
         Fast: ``feature_mean``, ``feature_scale`` (1280,) and ``head.<name>``; full: ``net.<name>``
         for the whole state dict.
         """
+        segment = {} if self.segment_head is None else self.segment_head.weights(SEGMENT_PREFIX)
         if self._net is not None:
-            return {f"net.{k}": v.detach().cpu().numpy() for k, v in self._net.state_dict().items()}
+            net = self._net.state_dict().items()
+            return {f"net.{k}": v.detach().cpu().numpy() for k, v in net} | segment
         assert self._head is not None and self._feature_mean is not None
         assert self._feature_scale is not None
         out = {f"head.{k}": v.detach().cpu().numpy() for k, v in self._head.state_dict().items()}
         out["feature_mean"] = self._feature_mean
         out["feature_scale"] = self._feature_scale
-        return out
+        return out | segment
 
     @classmethod
     def from_weights(
@@ -603,6 +614,11 @@ class GuardrailClassifier:
                 f"params say mode {params.mode!r} and input_size {params.input_size}, the model "
                 f"says mode {info['mode']!r} and input_size {info['input_size']}"
             )
+        segment_weights = {k: v for k, v in weights.items() if k.startswith(SEGMENT_PREFIX)}
+        weights = {k: v for k, v in weights.items() if not k.startswith(SEGMENT_PREFIX)}
+        segment_head = (
+            SegmentHead.from_weights(segment_weights, SEGMENT_PREFIX) if segment_weights else None
+        )
         for name, array in weights.items():
             if array.dtype.kind not in "fiub":
                 raise ModelFormatError(
@@ -633,7 +649,7 @@ class GuardrailClassifier:
                 raise ModelFormatError(f"weights: unexpected arrays for a full model: {extra[:5]}")
             net = _new_full_network()
             load(net, "net.")
-            return cls(info, net=net)
+            return cls(info, net=net, segment_head=segment_head)
 
         extra = [
             k
@@ -659,7 +675,13 @@ class GuardrailClassifier:
             )
         head = _make_head(params.fast_hidden_units, params.fast_dropout)
         load(head, "head.")
-        return cls(info, head=head, feature_mean=stats[0], feature_scale=stats[1])
+        return cls(
+            info,
+            head=head,
+            feature_mean=stats[0],
+            feature_scale=stats[1],
+            segment_head=segment_head,
+        )
 
 
 # ---------------------------------------------------------------------------------------------
@@ -708,7 +730,7 @@ def classification_metrics(labels: np.ndarray, predicted: np.ndarray) -> dict[st
     return out
 
 
-def _held_out_mask(
+def held_out_mask(
     labels: np.ndarray, groups: np.ndarray, fraction: float, rng: np.random.Generator
 ) -> np.ndarray:
     """(N,) bool: crops of a random subset of whole groups, about ``fraction`` of the groups.
@@ -765,7 +787,7 @@ def _fit_fast(
     scale = np.maximum(scale, np.float32(1e-6))  # constant features: keep them at 0
     x = torch.from_numpy((embeddings - mean) / scale)
     y = torch.from_numpy(labels.astype(np.int64))
-    with torch.random.fork_rng(devices=[]), _one_thread():
+    with torch.random.fork_rng(devices=[]), one_thread():
         torch.manual_seed(params.seed)
         head = _make_head(params.fast_hidden_units, params.fast_dropout)
         loss_fn = nn.CrossEntropyLoss(weight=_class_weights(labels))
@@ -854,7 +876,7 @@ def _make_info(
         "input_size": params.input_size,
         "classes": list(CLASS_NAMES),
         "threshold": params.threshold,
-        "version": f"{created:%Y%m%dT%H%M%S}-{weights_digest(weights)[:8]}",
+        "version": model_version(created, weights),
         "created": created.isoformat(),
         "backbone": backbone_info(),
         "trained_on": trained_on,
@@ -973,7 +995,7 @@ def train_classifier(
             f"training: expected crops of both classes, got {n_pos} guardrail and {n - n_pos} other"
         )
 
-    held = _held_out_mask(y, g, params.held_out_fraction, np.random.default_rng(params.seed))
+    held = held_out_mask(y, g, params.held_out_fraction, np.random.default_rng(params.seed))
     train = ~held
     held_out: dict[str, Any] | None = None
 

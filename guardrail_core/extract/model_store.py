@@ -32,14 +32,18 @@ from guardrail_core.extract.classify import (
     ARCHITECTURE,
     CLASS_NAMES,
     MODES,
+    SEGMENT_PREFIX,
     GuardrailClassifier,
     backbone_info,
     weights_digest,
 )
+from guardrail_core.extract.shape_features import SEGMENT_FEATURE_NAMES
 
 __all__ = ["MODEL_FORMAT_VERSION", "MODEL_FILE", "WEIGHTS_FILE", "load_model", "save_model"]
 
-MODEL_FORMAT_VERSION = 1
+MODEL_FORMAT_VERSION = (
+    2  # 2: optional segment head (segment.* arrays, "segment_head" in model.json)
+)
 MODEL_FILE = "model.json"
 WEIGHTS_FILE = "weights.npz"
 
@@ -200,6 +204,17 @@ def load_model(folder: Path) -> GuardrailClassifier:
                 f"{folder}: a fast model works on embeddings of the pretrained weights with sha256 "
                 f"{saved}, the installed {ARCHITECTURE} weights have {installed}"
             )
+
+    has_head = any(name.startswith(SEGMENT_PREFIX) for name in weights)
+    if has_head != ("segment_head" in document):
+        raise ModelFormatError(
+            f"{folder}: model.json and weights.npz disagree on whether there is a segment head"
+        )
+    if has_head and document["segment_head"].get("features") != list(SEGMENT_FEATURE_NAMES):
+        raise IncompatibleModelError(
+            f"{folder}: the segment head was trained on other segment features than this "
+            f"version computes; retrain the model"
+        )
 
     info = {key: value for key, value in document.items() if key != "format_version"}
     try:

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 
 from guardrail_core.extract.lattice import Lattice
 
@@ -29,6 +30,12 @@ class SegmentParams:
     phase_reach: int = 4
     """On those scan lines, pulses up to this many phases either side are neighbours, so a thin
     pipe or a beam edge whose hit drifts with the vehicle's vibration stays connected."""
+    fragment_points: int = 10
+    """Components of fewer points are fragments: the scattered hits of a thin pipe, a pole's
+    far side or a diagonal that the scan lines cross only here and there."""
+    fragment_reach_m: float = 0.3
+    """A fragment joins the larger component that comes closest to it within this many metres
+    (0: fragments stay apart, as in the paper)."""
     slice_length_m: float = 0.5
     """Section planes perpendicular to the trajectory cut components every this many metres
     (the paper's 0.5 m)."""
@@ -114,13 +121,64 @@ def wireframe_components(
     tail = np.concatenate(tails)
     graph = coo_matrix((np.ones(len(head), np.int8), (head, tail)), shape=(n, n)).tocsr()
     _, labels = connected_components(graph, directed=False)
-    # Renumber the components of kept points densely, in order of their first point.
-    component = np.full(n, -1, np.int32)
+    return _renumber(labels, kept)
+
+
+def _renumber(labels: np.ndarray, kept: np.ndarray) -> np.ndarray:
+    """(N,) int32: the labels of kept points renumbered 0.. in order of first point, else -1."""
+    component = np.full(len(labels), -1, np.int32)
     _, first, inverse = np.unique(labels[kept], return_index=True, return_inverse=True)
     rank = np.empty(len(first), np.int64)
     rank[np.argsort(first, kind="stable")] = np.arange(len(first))
     component[kept] = rank[inverse]
     return component
+
+
+def absorb_fragments(
+    xyz: np.ndarray, component: np.ndarray, params: SegmentParams = SegmentParams()
+) -> np.ndarray:
+    """Join each small component to the nearest larger one within reach.
+
+    The wireframe leaves a thin pipe's sparse hits as many components of a few points each; as
+    their own 0.5 m segments they are too small to crop and classify, though they lie beside the
+    rail they belong to. A fragment (fewer than ``fragment_points`` points) joins the component
+    of at least that many points that comes closest to any of its points, if within
+    ``fragment_reach_m``; otherwise it stays as it is.
+
+    Parameters
+    ----------
+    xyz : (N, 3) float64, metres
+    component : (N,) int, component of every point from :func:`wireframe_components`, -1 for
+        points not kept
+
+    Returns
+    -------
+    (N,) int32 components, renumbered densely in order of first point; -1 where not kept.
+    """
+    component = np.asarray(component, np.int64)
+    kept = component >= 0
+    if params.fragment_reach_m <= 0 or not kept.any():
+        return component.astype(np.int32)
+    size = np.bincount(component[kept])
+    small = kept & (size[np.maximum(component, 0)] < params.fragment_points)
+    large = np.flatnonzero(kept & ~small)
+    fragment = np.flatnonzero(small)
+    merged = component.copy()
+    if len(large) and len(fragment):
+        distance, nearest = cKDTree(xyz[large]).query(
+            xyz[fragment], distance_upper_bound=params.fragment_reach_m
+        )
+        reached = np.isfinite(distance)
+        owner = component[fragment]
+        closest = np.full(len(size), np.inf)
+        np.minimum.at(closest, owner[reached], distance[reached])
+        # The point of the fragment that comes closest decides where the whole fragment goes.
+        decides = reached & (distance == closest[owner])
+        target = np.full(len(size), -1, np.int64)
+        target[owner[decides]] = component[large[nearest[decides]]]
+        moves = target[owner] >= 0
+        merged[fragment[moves]] = target[owner[moves]]
+    return _renumber(merged, kept)
 
 
 def slice_components(

@@ -1,0 +1,202 @@
+"""The segment head: P(guardrail) of a segment from its shape, its neighbours and its crop.
+
+The crop classifier (§3.3) sees only an image, and a segment without a usable image gets no
+answer from it. The segment head is a small network over every segment: its shape and neighbour
+features (:mod:`guardrail_core.extract.shape_features`), the crop classifier's logit, and whether
+there was a crop at all. It is trained on crop logits predicted out of fold (by crop classifiers
+that never saw that crop), so it learns how far to trust the crop classifier on new data.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+
+from guardrail_core.errors import InvalidOptionError, ModelFormatError
+from guardrail_core.extract.torch_threads import one_thread
+
+_LOGIT_CLIP = 1e-5  # crop probabilities are clipped to [eps, 1 - eps] before the logit
+
+
+@dataclass(frozen=True)
+class SegmentHeadParams:
+    """Training of the segment head.
+
+    Attributes
+    ----------
+    hidden_units : width of the one hidden ReLU layer
+    epochs : full-batch AdamW steps
+    lr : learning rate
+    weight_decay : AdamW decoupled weight decay
+    folds : the training crops are split into this many folds of whole spatial blocks; each fold's
+        crop logits come from a crop classifier trained on the other folds
+    """
+
+    hidden_units: int = 64
+    epochs: int = 1000
+    lr: float = 1e-2
+    weight_decay: float = 1e-4
+    folds: int = 4
+
+    def __post_init__(self) -> None:
+        for name in ("hidden_units", "epochs"):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+                raise InvalidOptionError(f"segment head: {name} must be >= 1, got {value!r}")
+        if not isinstance(self.folds, int) or self.folds < 2:
+            raise InvalidOptionError(f"segment head: folds must be >= 2, got {self.folds!r}")
+        if not self.lr > 0 or not self.weight_decay >= 0:
+            raise InvalidOptionError(
+                f"segment head: lr must be > 0 and weight_decay >= 0, got {self.lr!r} and "
+                f"{self.weight_decay!r}"
+            )
+
+    def to_json(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+
+def head_inputs(features: np.ndarray, crop_proba: np.ndarray) -> np.ndarray:
+    """(S, F + 2) float32: the features, the crop logit (0 without a crop) and has-crop (0/1).
+
+    Parameters
+    ----------
+    features : (S, F) float32, :func:`~guardrail_core.extract.shape_features.segment_features`
+    crop_proba : (S,) float, the crop classifier's P(guardrail); NaN where there is no crop
+    """
+    features = np.asarray(features, np.float32)
+    crop_proba = np.asarray(crop_proba, np.float64)
+    if features.ndim != 2 or crop_proba.shape != (len(features),):
+        raise InvalidOptionError(
+            f"segment head: expected (S, F) features and (S,) crop probabilities, got "
+            f"{features.shape} and {crop_proba.shape}"
+        )
+    has_crop = np.isfinite(crop_proba)
+    p = np.clip(np.where(has_crop, crop_proba, 0.5), _LOGIT_CLIP, 1 - _LOGIT_CLIP)
+    logit = np.log(p / (1 - p))
+    return np.concatenate(
+        [features, logit[:, None].astype(np.float32), has_crop[:, None].astype(np.float32)],
+        axis=1,
+    )
+
+
+def _network(n_inputs: int, hidden_units: int) -> nn.Module:
+    return nn.Sequential(nn.Linear(n_inputs, hidden_units), nn.ReLU(), nn.Linear(hidden_units, 2))
+
+
+class SegmentHead:
+    """A trained segment head: standardisation and a one-hidden-layer network.
+
+    Attributes
+    ----------
+    mean, scale : (F + 2,) float32, standardisation of :func:`head_inputs`
+    """
+
+    def __init__(self, mean: np.ndarray, scale: np.ndarray, net: nn.Module) -> None:
+        self.mean = mean
+        self.scale = scale
+        self._net = net
+        net.eval()
+        net.requires_grad_(False)
+
+    @property
+    def n_inputs(self) -> int:
+        return int(len(self.mean))
+
+    def proba(self, features: np.ndarray, crop_proba: np.ndarray) -> np.ndarray:
+        """(S,) float64 P(guardrail) of segments; see :func:`head_inputs` for the inputs."""
+        x = head_inputs(features, crop_proba)
+        if x.shape[1] != self.n_inputs:
+            raise InvalidOptionError(
+                f"segment head: expected {self.n_inputs - 2} features per segment, got "
+                f"{x.shape[1] - 2}"
+            )
+        if len(x) == 0:
+            return np.zeros(0)
+        z = torch.from_numpy((x - self.mean) / self.scale)
+        with torch.inference_mode(), one_thread():
+            return torch.softmax(self._net(z), dim=1)[:, 1].numpy().astype(np.float64)
+
+    def weights(self, prefix: str) -> dict[str, np.ndarray]:
+        """Named arrays for ``weights.npz``: ``<prefix>mean``, ``<prefix>scale``, the layers."""
+        out = {f"{prefix}net.{k}": v.numpy().copy() for k, v in self._net.state_dict().items()}
+        out[f"{prefix}mean"] = self.mean
+        out[f"{prefix}scale"] = self.scale
+        return out
+
+    @classmethod
+    def from_weights(cls, weights: dict[str, np.ndarray], prefix: str) -> SegmentHead:
+        """Rebuild from :meth:`weights`; :class:`ModelFormatError` when they do not fit."""
+        try:
+            mean = np.asarray(weights[f"{prefix}mean"], np.float32)
+            scale = np.asarray(weights[f"{prefix}scale"], np.float32)
+            first = np.asarray(weights[f"{prefix}net.0.weight"])
+        except KeyError as exc:
+            raise ModelFormatError(f"weights: the segment head lacks {exc.args[0]}") from exc
+        if mean.ndim != 1 or scale.shape != mean.shape or not np.all(scale > 0):
+            raise ModelFormatError("weights: the segment head's standardisation is malformed")
+        if first.ndim != 2 or first.shape[1] != len(mean):
+            raise ModelFormatError(
+                f"weights: the segment head's first layer {first.shape} does not take "
+                f"{len(mean)} inputs"
+            )
+        net = _network(len(mean), first.shape[0])
+        state = {
+            k[len(prefix) + 4 :]: torch.from_numpy(np.array(v))
+            for k, v in weights.items()
+            if k.startswith(f"{prefix}net.")
+        }
+        try:
+            net.load_state_dict(state, strict=True)
+        except RuntimeError as exc:
+            raise ModelFormatError(f"weights: the segment head does not load: {exc}") from exc
+        return cls(mean, scale, net)
+
+
+def fit_segment_head(
+    features: np.ndarray,
+    crop_proba: np.ndarray,
+    labels: np.ndarray,
+    params: SegmentHeadParams = SegmentHeadParams(),
+    *,
+    seed: int = 0,
+) -> SegmentHead:
+    """Train a segment head, full batch, with balanced class weights.
+
+    Parameters
+    ----------
+    features : (S, F) float32 segment features
+    crop_proba : (S,) out-of-fold crop P(guardrail), NaN where there is no crop
+    labels : (S,) bool, True = guardrail; both classes must occur
+    """
+    x = head_inputs(features, crop_proba)
+    y = np.asarray(labels, bool)
+    counts = np.array([np.count_nonzero(~y), np.count_nonzero(y)], np.float64)
+    if len(y) != len(x) or counts.min() == 0:
+        raise InvalidOptionError(
+            f"segment head: expected labels of both classes for {len(x)} segments, got "
+            f"{int(counts[1])} guardrail and {int(counts[0])} other"
+        )
+    mean = x.mean(axis=0)
+    scale = np.maximum(x.std(axis=0), np.float32(1e-6))
+    z = torch.from_numpy((x - mean) / scale)
+    target = torch.from_numpy(y.astype(np.int64))
+    with torch.random.fork_rng(devices=[]), one_thread():
+        torch.manual_seed(seed)
+        net = _network(x.shape[1], params.hidden_units)
+        loss_fn = nn.CrossEntropyLoss(
+            weight=torch.tensor(len(y) / (2 * counts), dtype=torch.float32)
+        )
+        optimiser = torch.optim.AdamW(
+            net.parameters(), lr=params.lr, weight_decay=params.weight_decay
+        )
+        net.train()
+        for _ in range(params.epochs):
+            optimiser.zero_grad()
+            loss_fn(net(z), target).backward()
+            optimiser.step()
+    return SegmentHead(mean.astype(np.float32), scale.astype(np.float32), net)
