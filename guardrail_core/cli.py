@@ -79,20 +79,24 @@ def _train(args: argparse.Namespace) -> int:
 
 
 def _held_out_report(info: dict) -> str:
-    metrics = info.get("metrics", {}).get("held_out", {})
+    metrics = info.get("metrics", {})
     trained = info.get("trained_on", {})
     lines = [
-        f"trained on {trained.get('crops', '?')} crops "
-        f"({trained.get('guardrail', '?')} guardrail, {trained.get('other', '?')} other); "
-        f"held out {metrics.get('n_held_out', '?')}:"
+        f"trained on {trained.get('segments', '?')} segments, {trained.get('crops', '?')} with a "
+        f"crop ({trained.get('guardrail', '?')} guardrail, {trained.get('other', '?')} other)"
     ]
-    for name in ("guardrail", "other"):
-        m = metrics.get(name)
-        if m:
-            lines.append(
-                f"  {name:10s} recall {100 * m['recall']:5.1f}%  precision "
-                f"{100 * m['precision']:5.1f}%  F {100 * m['f1']:5.1f}%  (n={m['n']})"
-            )
+    for key, what in (("held_out", "segments"), ("held_out_crops", "crops alone")):
+        held = metrics.get(key)
+        if not held:
+            continue
+        lines.append(f"held out {held['n_held_out']} {what}:")
+        for name in ("guardrail", "other"):
+            m = held.get(name)
+            if m and m["f1"] is not None:
+                lines.append(
+                    f"  {name:10s} recall {100 * m['recall']:5.1f}%  precision "
+                    f"{100 * m['precision']:5.1f}%  F {100 * m['f1']:5.1f}%  (n={m['n']})"
+                )
     return "\n".join(lines)
 
 

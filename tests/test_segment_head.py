@@ -1,0 +1,101 @@
+"""The segment head: fusing shape features with the crop classifier's answer."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from guardrail_core.errors import IncompatibleModelError, InvalidOptionError, ModelFormatError
+from guardrail_core.extract.model_store import load_model
+from guardrail_core.extract.segment_head import (
+    SegmentHead,
+    SegmentHeadParams,
+    fit_segment_head,
+    head_inputs,
+)
+from guardrail_core.extract.shape_features import SEGMENT_FEATURE_DIM, SEGMENT_FEATURE_NAMES
+
+QUICK = SegmentHeadParams(hidden_units=16, epochs=300)
+
+
+def test_inputs_carry_the_crop_logit_and_whether_there_was_a_crop() -> None:
+    x = head_inputs(np.ones((3, 2), np.float32), np.array([0.9, np.nan, 0.5]))
+    np.testing.assert_allclose(x[:, 2], [np.log(9.0), 0.0, 0.0], atol=1e-6)
+    np.testing.assert_array_equal(x[:, 3], [1.0, 0.0, 1.0])
+    with pytest.raises(InvalidOptionError, match="crop probabilities"):
+        head_inputs(np.ones((3, 2)), np.zeros(2))
+
+
+def synthetic(n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Guardrail when feature 0 is positive, or, for half the segments (feature 1 > 0), when
+    their crop says so; the crop is right 95% of the time and missing for a fifth."""
+    features = rng.normal(size=(n, 3)).astype(np.float32)
+    crop_truth = rng.random(n) < 0.5
+    labels = np.where(features[:, 1] > 0, crop_truth, features[:, 0] > 0)
+    right = rng.random(n) < 0.95
+    crop = np.where(right == crop_truth, 0.9, 0.1)
+    crop[rng.random(n) < 0.2] = np.nan
+    labels = np.where(np.isnan(crop) & (features[:, 1] > 0), features[:, 0] > 0, labels)
+    return features, crop, labels
+
+
+def test_the_head_learns_when_to_trust_shape_and_when_the_crop() -> None:
+    rng = np.random.default_rng(0)
+    head = fit_segment_head(*synthetic(4000, rng), QUICK)
+    features, crop, labels = synthetic(2000, rng)
+    predicted = head.proba(features, crop) > 0.5
+    shape_decides = features[:, 1] <= 0
+    assert (predicted == labels)[shape_decides].mean() >= 0.97
+    # Where the crop decides, the head can be no better than the crop (95%).
+    crop_decides = ~shape_decides & np.isfinite(crop)
+    assert (predicted == labels)[crop_decides].mean() >= 0.9
+
+
+def test_weights_round_trip_and_errors() -> None:
+    rng = np.random.default_rng(1)
+    features, crop, labels = synthetic(500, rng)
+    head = fit_segment_head(features, crop, labels, QUICK)
+    again = SegmentHead.from_weights(head.weights("segment."), "segment.")
+    np.testing.assert_array_equal(again.proba(features, crop), head.proba(features, crop))
+    weights = head.weights("segment.")
+    del weights["segment.mean"]
+    with pytest.raises(ModelFormatError, match="lacks"):
+        SegmentHead.from_weights(weights, "segment.")
+    with pytest.raises(InvalidOptionError, match="expected 3 features"):
+        head.proba(features[:, :2], crop)
+    with pytest.raises(InvalidOptionError, match="both classes"):
+        fit_segment_head(features, crop, np.ones(len(features), bool), QUICK)
+    with pytest.raises(InvalidOptionError, match="folds"):
+        SegmentHeadParams(folds=1)
+
+
+def test_a_model_trained_on_drives_has_a_measured_segment_head(model_path: Path) -> None:
+    model = load_model(model_path)
+    assert model.segment_head is not None
+    assert model.segment_head.n_inputs == SEGMENT_FEATURE_DIM + 2
+    info = model.info
+    assert info["segment_head"]["features"] == list(SEGMENT_FEATURE_NAMES)
+    held, crops = info["metrics"]["held_out"], info["metrics"]["held_out_crops"]
+    # Segments are measured with or without a crop, so more of them than crops.
+    assert held["n_train"] + held["n_held_out"] == info["trained_on"]["segments"]
+    assert crops["n_train"] + crops["n_held_out"] == info["trained_on"]["crops"]
+    assert info["trained_on"]["segments"] > info["trained_on"]["crops"]
+
+
+def test_a_segment_head_of_other_features_is_refused(model_path: Path, tmp_path: Path) -> None:
+    copy = tmp_path / "model"
+    copy.mkdir()
+    for name in ("model.json", "weights.npz"):
+        (copy / name).write_bytes((model_path / name).read_bytes())
+    document = json.loads((copy / "model.json").read_text())
+    document["segment_head"]["features"] = ["height_min_m"]
+    (copy / "model.json").write_text(json.dumps(document))
+    with pytest.raises(IncompatibleModelError, match="retrain"):
+        load_model(copy)
+    del document["segment_head"]
+    (copy / "model.json").write_text(json.dumps(document))
+    with pytest.raises(ModelFormatError, match="disagree"):
+        load_model(copy)
