@@ -173,7 +173,8 @@ def main() -> int:
         f"(target >= {TARGET_POINTS_PER_S / 1e6:.1f} M: {verdict})"
     )
     stages = {
-        s: statistics.median(r["stages"][s]["seconds"] for r in g["runs"]) for s in GEOMETRIC_STAGES
+        s: statistics.median(r["stages"][s]["seconds"] for r in g["runs"])
+        for s in (*GEOMETRIC_STAGES, "features")
     }
     print("  per stage (median s): " + ", ".join(f"{k} {v:.3f}" for k, v in stages.items()))
     print(
