@@ -227,5 +227,6 @@ def segment_features(
 
 def _distinct_per_segment(seg_of: np.ndarray, value: np.ndarray, n_seg: int) -> np.ndarray:
     """(S,) number of distinct ``value`` per segment, for sorted ``seg_of``."""
-    key = np.unique(seg_of * (int(value.max(initial=0)) + 1) + value)
-    return np.bincount(key // (int(value.max(initial=0)) + 1), minlength=n_seg).astype(np.float64)
+    stride = int(value.max(initial=0)) + 1
+    key = np.unique(seg_of * stride + value)
+    return np.bincount(key // stride, minlength=n_seg).astype(np.float64)
