@@ -70,3 +70,7 @@ class TrainingDataError(GuardrailError):
 
 class RunFolderError(GuardrailError):
     """A run folder is missing a file or does not match the drive it is evaluated against."""
+
+
+class ReconstructionError(GuardrailError):
+    """Guardrail points cannot be reconstructed as asked (bad parameters, no guardrail at all)."""
