@@ -128,8 +128,65 @@ def _process(args: argparse.Namespace) -> int:
         f"{counts['guardrail_segments']} after label correction "
         f"({counts['guardrail_points']} points)"
     )
+    if "reconstruction" in info:
+        print(_reconstruction_summary(info["reconstruction"]))
     print(f"wrote {args.out}")
     return 0
+
+
+def _reconstruction_params(args: argparse.Namespace):
+    import json
+
+    from guardrail_core.errors import InvalidOptionError
+    from guardrail_core.reconstruction import ReconstructionParams
+
+    params = ReconstructionParams()
+    if getattr(args, "params", None):
+        try:
+            data = json.loads(Path(args.params).read_text())
+        except (OSError, json.JSONDecodeError) as exc:
+            raise InvalidOptionError(f"--params {args.params}: cannot read it ({exc})") from exc
+        params = ReconstructionParams.from_json(data.get("params", data))
+    return params.with_settings(getattr(args, "set", None) or [])
+
+
+def _reconstruct(args: argparse.Namespace) -> int:
+    from guardrail_core.drive import load_drive
+    from guardrail_core.reconstruction import reconstruct_into
+    from guardrail_core.run_folder import load_run
+
+    params = _reconstruction_params(args)
+    run = load_run(args.run_dir)
+    drive = load_drive(args.drive or run.info["drive"]["path"], with_truth=False)
+    if len(drive.points) != len(run.point_segment):
+        from guardrail_core.errors import RunFolderError
+
+        raise RunFolderError(
+            f"{args.run_dir}: made from a drive of {len(run.point_segment)} points, but "
+            f"{drive.root} has {len(drive.points)}; give the right drive with --drive"
+        )
+    summary = reconstruct_into(
+        Path(args.run_dir),
+        drive.points.xyz,
+        run.point_segment,
+        run.segments["label"],
+        drive.trajectory.position,
+        origin=drive.origin,
+        crs=drive.crs,
+        params=params,
+        progress=not args.quiet,
+    )
+    print(_reconstruction_summary(summary))
+    print(f"wrote {Path(args.run_dir) / 'reconstruction'}")
+    return 0
+
+
+def _reconstruction_summary(summary: dict) -> str:
+    return (
+        f"guardrail runs: {summary['runs']} ({summary['reconstructed']} reconstructed, "
+        f"{summary['poles_only']} poles only, {summary['not_reconstructed']} not reconstructed) "
+        f"in {summary['seconds']:.1f} s"
+    )
 
 
 def _evaluate(args: argparse.Namespace) -> int:
@@ -139,11 +196,31 @@ def _evaluate(args: argparse.Namespace) -> int:
     from guardrail_core.evaluate import evaluate_run, format_report
     from guardrail_core.run_folder import load_run
 
-    result = evaluate_run(load_drive(args.drive), load_run(args.run))
+    drive, run = load_drive(args.drive), load_run(args.run)
+    result = evaluate_run(drive, run)
+    sweep = None
+    if args.units_sweep:
+        from guardrail_core.units_sweep import (
+            format_units_sweep,
+            parse_units,
+            plot_units_sweep,
+            units_sweep,
+        )
+
+        units = parse_units(args.units_sweep)
+        sweep = units_sweep(
+            drive, run, units, params=_reconstruction_params(args), progress=not args.quiet
+        )
+        plot = plot_units_sweep(sweep, args.plot or Path(args.run) / "units_sweep.png")
+        result["units_sweep"] = {**sweep, "plot": str(plot)}
     if args.json:
         print(json.dumps(result, indent=2))
     else:
         print(format_report(result))
+        if sweep is not None:
+            print()
+            print(format_units_sweep(sweep))
+            print(f"plot: {result['units_sweep']['plot']}")
     return 0
 
 
@@ -181,6 +258,22 @@ def _demo(args: argparse.Namespace) -> int:
     print("\nthe model was trained on this drive, so these figures are in-sample:")
     print(format_report(evaluate_run(drive, load_run(run_dir))))
     return 0
+
+
+def _add_reconstruction_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--params",
+        type=Path,
+        metavar="JSON",
+        help="reconstruction parameters: a JSON object {stage: {name: value}} (or a "
+        "reconstruction/models.json, whose parameters are used)",
+    )
+    parser.add_argument(
+        "--set",
+        action="append",
+        metavar="STAGE.NAME=VALUE",
+        help="one reconstruction parameter, e.g. pipes.slice_interval_m=0.02 (repeatable)",
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -284,7 +377,35 @@ def build_parser() -> argparse.ArgumentParser:
     evaluate.add_argument("drive", type=Path)
     evaluate.add_argument("--run", type=Path, required=True, help="run folder (guardrail process)")
     evaluate.add_argument("--json", action="store_true", help="print one JSON object instead")
+    evaluate.add_argument(
+        "--units-sweep",
+        metavar="K,...",
+        help="also reconstruct every run from only its first K units, for each K, and report "
+        "the pipes found per design (the experiment of §5.2), e.g. 1,2,4,8,16,32",
+    )
+    evaluate.add_argument(
+        "--plot",
+        type=Path,
+        help="PNG of the units sweep (default RUN/units_sweep.png)",
+    )
+    _add_reconstruction_options(evaluate)
+    evaluate.add_argument("--quiet", action="store_true", help="no progress bars")
     evaluate.set_defaults(func=_evaluate)
+
+    reconstruct = sub.add_parser(
+        "reconstruct",
+        help="reconstruct the guardrails of a run folder again, with other parameters",
+        description="Reconstruct the guardrail runs of RUN_DIR (poles, unit shapes superimposed "
+        "with ICP, pipes or beam sections, meshes and inventory) and replace "
+        "RUN_DIR/reconstruction. `guardrail process` already did this with the defaults.",
+    )
+    reconstruct.add_argument("run_dir", type=Path, metavar="RUN_DIR")
+    reconstruct.add_argument(
+        "--drive", type=Path, help="the drive of the run (default: the path in run.json)"
+    )
+    _add_reconstruction_options(reconstruct)
+    reconstruct.add_argument("--quiet", action="store_true", help="no progress bars")
+    reconstruct.set_defaults(func=_reconstruct)
 
     demo = sub.add_parser(
         "demo",

@@ -10,7 +10,9 @@ import numpy as np
 from guardrail_core.classes import GUARDRAIL_CLASSES
 from guardrail_core.drive import Drive
 from guardrail_core.errors import MissingDriveFileError, RunFolderError
+from guardrail_core.evaluate_reconstruction import evaluate_reconstruction
 from guardrail_core.extract.crops import CROP_STATUS_NAMES
+from guardrail_core.reconstruction import RECONSTRUCTION_DIR, load_reconstruction
 from guardrail_core.run_folder import Run
 
 
@@ -64,7 +66,9 @@ def evaluate_run(drive: Drive, run: Run) -> dict[str, Any]:
     -------
     ``{"segments": Table 1 counts, "crops": crop status counts, "detection": metrics after
     correction, "detection_raw": before correction, "points": guardrail point recall and
-    precision after correction}``
+    precision after correction, "reconstruction": figures of
+    :func:`~guardrail_core.evaluate_reconstruction.evaluate_reconstruction` (when the run has
+    a reconstruction)}``
 
     Raises
     ------
@@ -92,7 +96,7 @@ def evaluate_run(drive: Drive, run: Run) -> dict[str, Any]:
     point_label = np.zeros(len(point_guardrail), bool)
     point_label[in_segment] = label[run.point_segment[in_segment]]
     tp = int((point_guardrail & point_label).sum())
-    return {
+    result = {
         "segments": {
             "guardrail": int(truth.sum()),
             "other": int((~truth).sum()),
@@ -115,6 +119,10 @@ def evaluate_run(drive: Drive, run: Run) -> dict[str, Any]:
             }
         },
     }
+    if (run.root / RECONSTRUCTION_DIR / "models.json").is_file():
+        runs, _ = load_reconstruction(run.root)
+        result["reconstruction"] = evaluate_reconstruction(runs, drive.truth.objects)
+    return result
 
 
 def format_report(result: dict[str, Any]) -> str:
@@ -146,7 +154,36 @@ def format_report(result: dict[str, Any]) -> str:
         f"Guardrail points: recall {_pct(pts['recall'])}, precision {_pct(pts['precision'])} "
         f"of {pts['n_true']} true guardrail points",
     ]
+    if "reconstruction" in result:
+        lines += ["", *format_reconstruction(result["reconstruction"])]
     return "\n".join(lines)
+
+
+def format_reconstruction(rec: dict[str, Any]) -> list[str]:
+    """The reconstruction figures as a table: one row per design and one overall."""
+    lines = [
+        "Reconstruction (pipes of the unit shape; errors of found pipes; mm)",
+        f"  {'design':16s}{'pipes':>8s}{'radius':>8s}{'axis':>7s}{'beam':>7s}{'poles':>10s}"
+        f"{'pole pos':>10s}{'unit len':>10s}",
+    ]
+    rows = [*rec["designs"].items(), ("overall", rec["overall"])]
+    for name, f in rows:
+        pipes = f"{f['pipes_found']}/{f['pipes_total']}" if f["pipes_total"] else "-"
+        lines.append(
+            f"  {name:16s}{pipes:>8s}{_mm(f['radius_err_mm_median']):>8s}"
+            f"{_mm(f['axis_dev_mm_mean']):>7s}{_mm(f['beam_section_hausdorff_mm']):>7s}"
+            f"{f['poles_found']:>5d}/{f['poles_total']:<4d}{_mm(f['pole_pos_err_mm_median']):>10s}"
+            f"{_mm(f['unit_length_err_mm_median']):>10s}"
+        )
+    lines.append(
+        "  radius: median error; axis: mean deviation; beam: section Hausdorff; pole pos and "
+        "unit len: median errors"
+    )
+    return lines
+
+
+def _mm(value: float | None) -> str:
+    return "-" if value is None else f"{value:.1f}"
 
 
 def _pct(value: float) -> str:

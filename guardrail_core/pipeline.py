@@ -38,6 +38,7 @@ from guardrail_core.extract.segments import (
 )
 from guardrail_core.extract.shape_features import segment_features
 from guardrail_core.extract.track import track_coordinates
+from guardrail_core.reconstruction import ReconstructionParams, reconstruct_into
 from guardrail_core.run_folder import POINT_OFF_ROAD, POINT_ROAD, crop_name, write_run_files
 from guardrail_core.timing import StageTimer
 
@@ -178,10 +179,12 @@ def process_drive(
     out: Path,
     *,
     params: ExtractionParams = ExtractionParams(),
+    reconstruction: ReconstructionParams | None = ReconstructionParams(),
     overwrite: bool = False,
     progress: bool = False,
 ) -> dict[str, Any]:
-    """Extract guardrail segments from a drive with a trained model and write the run folder.
+    """Extract guardrail segments from a drive with a trained model, reconstruct the guardrails
+    and write the run folder.
 
     Parameters
     ----------
@@ -189,16 +192,18 @@ def process_drive(
     model : the trained classifier
     out : the run folder to write; written whole or not at all
     params : extraction parameters
+    reconstruction : reconstruction parameters (§4); None leaves the reconstruction out
     overwrite : replace an existing run folder
     progress : show progress bars
 
     Returns
     -------
-    The run's ``run.json`` content (counts, model, parameters).
+    The run's ``run.json`` content (counts, model, parameters), with ``reconstruction``: the
+    summary of :func:`guardrail_core.reconstruction.reconstruct_into` (when reconstructed).
 
     References
     ----------
-    Matsumoto et al. 2019, §3 (Fig. 3).
+    Matsumoto et al. 2019, §3 (Fig. 3) and §4.
     """
     out = Path(out)
     started = time.strftime("%Y-%m-%dT%H:%M:%S%z")
@@ -286,6 +291,19 @@ def process_drive(
                 image_files=[record.file for record in drive.images],
                 embeddings=embeddings,
             )
+        if reconstruction is not None:
+            with timer.stage("reconstruct", points=int(segments.n_points[label].sum())):
+                info["reconstruction"] = reconstruct_into(
+                    staging,
+                    drive.points.xyz,
+                    result.point_segment,
+                    label,
+                    drive.trajectory.position,
+                    origin=drive.origin,
+                    crs=drive.crs,
+                    params=reconstruction,
+                    progress=progress,
+                )
         # The write stage's own time is known only now: rewrite timings.json with it.
         (staging / "timings.json").write_text(json.dumps(timer.as_json(), indent=2) + "\n")
         commit_folder(staging, out)

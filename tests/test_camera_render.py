@@ -10,9 +10,10 @@ import pytest
 from guardrail_core.camera_model import Camera
 from guardrail_core.classes import TruthClass
 from guardrail_core.geometry import make_transform, rotation_from_euler, transform_points
+from guardrail_core.mesh import box, grid_surface, sphere
 from guardrail_core.synth.camera_render import Lighting, random_lighting, render_image
 from guardrail_core.synth.camera_rig import default_camera_rig
-from guardrail_core.synth.mesh import MeshBuilder, box, grid_surface, sphere
+from guardrail_core.synth.mesh import MeshBuilder
 from guardrail_core.synth.raycast import SceneRaycaster
 
 SMALL = {"width": 320, "height": 240}

@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 from guardrail_core.errors import DriveFormatError
+from guardrail_core.mesh import box
 from guardrail_core.scanner_model import ScannerParams, scanner_mounting
-from guardrail_core.synth.mesh import MeshBuilder, box
+from guardrail_core.synth.mesh import MeshBuilder
 from guardrail_core.synth.raycast import SceneRaycaster
 from guardrail_core.synth.scanner import scan
 from guardrail_core.trajectory import Trajectory

@@ -18,9 +18,9 @@ from collections.abc import Callable
 import numpy as np
 
 from guardrail_core.classes import TruthClass
-from guardrail_core.synth.guardrail import dome
+from guardrail_core.mesh import Mesh, box, cylinder, dome, segment_box, sphere, tube
 from guardrail_core.synth.materials import PAINTS
-from guardrail_core.synth.mesh import Mesh, MeshBuilder, box, cylinder, segment_box, sphere, tube
+from guardrail_core.synth.mesh import MeshBuilder
 
 CONFOUNDER_KINDS = (
     "mesh_fence",

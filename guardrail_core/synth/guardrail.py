@@ -11,44 +11,15 @@ from __future__ import annotations
 import numpy as np
 
 from guardrail_core.classes import TruthClass
+from guardrail_core.mesh import cylinder, dome, sweep, thick_outline, tube
 from guardrail_core.synth.designs import Design
 from guardrail_core.synth.materials import PAINTS
-from guardrail_core.synth.mesh import Mesh, MeshBuilder, cylinder, sweep, tube
+from guardrail_core.synth.mesh import MeshBuilder
 
 #: Circle segments of pipe tubes and of posts.
 PIPE_SECTIONS = 12
 POLE_SECTIONS = 16
 _Z = np.array([0.0, 0.0, 1.0])
-
-
-def dome(centre: np.ndarray, radius: float, *, sections: int = 16, rings: int = 4) -> Mesh:
-    """A hemisphere of ``radius`` (m) bulging up (+z) from ``centre`` (3,); open at its base.
-
-    Faces: ``sections * (2 * rings - 1)``.
-    """
-    centre = np.asarray(centre, np.float64)
-    lat = np.linspace(0.0, np.pi / 2, rings + 1)[:-1]  # 0 = equator; the pole is added last
-    lon = np.linspace(0.0, 2 * np.pi, sections, endpoint=False)
-    ring = np.stack(
-        [
-            np.cos(lat)[:, None] * np.cos(lon)[None, :],
-            np.cos(lat)[:, None] * np.sin(lon)[None, :],
-            np.repeat(np.sin(lat)[:, None], sections, axis=1),
-        ],
-        axis=-1,
-    )
-    vertices = np.vstack([ring.reshape(-1, 3), [[0.0, 0.0, 1.0]]]) * radius + centre
-    i, j = np.meshgrid(np.arange(rings - 1), np.arange(sections), indexing="ij")
-    a = i * sections + j
-    b = i * sections + (j + 1) % sections
-    c = a + sections
-    d = b + sections
-    faces = np.concatenate([np.stack([a, b, d], -1), np.stack([a, d, c], -1)]).reshape(-1, 3)
-    top = rings * sections
-    jj = np.arange(sections)
-    last = (rings - 1) * sections
-    fan = np.stack([last + jj, last + (jj + 1) % sections, np.full(sections, top)], -1)
-    return vertices, np.vstack([faces, fan])
 
 
 def _validate_run(poles: np.ndarray, toward_road: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -184,7 +155,7 @@ def build_guardrail_run(
     beam_records = []
     up = np.broadcast_to(_Z, poles.shape)
     for beam in design.beams:
-        outline = _thick_outline(beam.section, beam.thickness)
+        outline = thick_outline(beam.section, beam.thickness)
         builder.add(
             sweep(outline, poles, across, up),
             cls=TruthClass.GUARDRAIL,
@@ -212,18 +183,3 @@ def build_guardrail_run(
         "beams": beam_records,
         "length": float(sum(u["length"] for u in unit_records)),
     }
-
-
-def _thick_outline(section: np.ndarray, thickness: float) -> np.ndarray:
-    """Closed outline (2M + 1, 2) of a plate of ``thickness`` around the mid curve (M, 2).
-
-    Each side is the mid curve offset by thickness/2 along its in-plane normal; sweeping the
-    closed loop gives both faces of the plate and its top and bottom edges.
-    """
-    sec = np.asarray(section, np.float64)
-    tangent = np.gradient(sec, axis=0)
-    tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
-    normal = np.stack([tangent[:, 1], -tangent[:, 0]], axis=1)
-    front = sec + normal * thickness / 2
-    back = sec - normal * thickness / 2
-    return np.vstack([front, back[::-1], front[:1]])

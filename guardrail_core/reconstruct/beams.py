@@ -1,0 +1,374 @@
+"""Unit type and section curve of guardrails consisting of beams (Matsumoto et al. 2019, §4.4).
+
+Input: superimposed points of units in unit coordinates (:mod:`guardrail_core.reconstruct.unit_frame`:
+x along the unit from its first pole's axis, y above the ground line, z toward the road; metres).
+
+§4.4: "a relatively large rectangle region is filled by points" for beams, not for pipes
+(:func:`unit_type`). The section curve of a beam is the centre of its points in 10 mm horizontal
+slices, joined into a polyline and smoothed by Taubin's low-pass filter (:func:`reconstruct_beam`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from guardrail_core.errors import ReconstructionError
+from guardrail_core.reconstruct.pipes import check_unit_points
+from guardrail_core.reconstruct.smoothing import taubin_smooth
+
+__all__ = ["BeamParams", "BeamReconstruction", "reconstruct_beam", "unit_type"]
+
+
+@dataclass(frozen=True)
+class BeamParams:
+    """Thresholds of beam detection and section extraction (§4.4). Lengths in metres.
+
+    Attributes
+    ----------
+    cell : float, m
+        Cell size of the occupancy grid of :func:`unit_type` (x and y).
+    band : float, m
+        Height of the band of rows whose points count for a row's occupancy: single-unit scans
+        of a beam are slanted stripes ~0.1 m apart, a band of rows spreads them over x, while
+        the balusters of a pipe fence stay at fixed x.
+    row_share : float in (0, 1]
+        A row is occupied when this share of its x cells holds points (within its band).
+    filled_share : float in (0, 1]
+        A region of occupied rows is "filled by points" when the mean occupancy of its rows
+        reaches this share.
+    min_height : float, m
+        Least height of a filled region for the unit to be a beam ("relatively large").
+    max_gap : float, m
+        Rows below ``row_share`` over at most this height (shadowed corrugation valleys) do not
+        break a region.
+    type_margin : float, m
+        :func:`unit_type` ignores points within this x distance of the poles (it knows no pole
+        radius; beam posts are ~0.07 m in radius).
+    max_open_share : float in [0, 1)
+        A beam covers every x between its posts: when more than this share of the ``cell / 2``
+        wide x bins between the margins hold no point (in the middle half of the heights), the
+        unit is a pipe fence (vertical pipes
+        at fixed x, however dense the superimposed points make its rows look).
+    pole_margin : float, m
+        :func:`reconstruct_beam` drops points within ``pole_radius + pole_margin`` in x of a pole.
+    post_gap : float, m
+        Points more than this behind (lower z than) the beam's rear-most slice centre are post or
+        blockout points and are dropped.
+    slice_interval : float, m
+        Height of the horizontal slices (§4.4: 10 mm).
+    min_points : int
+        Fewest points for a slice to give a centre.
+    shadow_gap : float, m
+        A step in y between consecutive section vertices above this is a shadowed stretch.
+    sparse_share : float in [0, 1)
+        Slices with fewer points than this share of the median slice are left out (grazing
+        views at the edge of a shadow, whose centres are biased).
+    fill_shadowed : bool
+        Fill the shadowed downward-facing flank below a ridge (the scanner looks down on the
+        beam and cannot see it) with the mirror image of the ridge's upper flank about its
+        crest; also below the lowest vertex when the section stops near a crest. Assumes the
+        symmetric ridges of standard W and thrie beams; False bridges gaps straight.
+    taubin_lambda, taubin_mu : float
+        Taubin's filter factors.
+    taubin_iterations : int
+        Taubin's filter iterations.
+    """
+
+    cell: float = 0.02
+    band: float = 0.06
+    row_share: float = 0.4
+    filled_share: float = 0.5
+    min_height: float = 0.2
+    max_gap: float = 0.08
+    type_margin: float = 0.2
+    max_open_share: float = 0.1
+    pole_margin: float = 0.05
+    post_gap: float = 0.03
+    slice_interval: float = 0.01
+    min_points: int = 3
+    shadow_gap: float = 0.02
+    sparse_share: float = 0.05
+    fill_shadowed: bool = True
+    taubin_lambda: float = 0.5
+    taubin_mu: float = -0.53
+    taubin_iterations: int = 5
+
+    def __post_init__(self) -> None:
+        for name in ("cell", "band", "min_height", "slice_interval"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise ReconstructionError(f"BeamParams.{name} must be > 0, got {v}")
+        for name in ("max_gap", "type_margin", "pole_margin", "post_gap", "shadow_gap"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise ReconstructionError(f"BeamParams.{name} must be >= 0, got {v}")
+        if not 0.0 <= self.sparse_share < 1.0:
+            raise ReconstructionError(
+                f"BeamParams.sparse_share must be in [0, 1), got {self.sparse_share}"
+            )
+        for name in ("row_share", "filled_share"):
+            v = getattr(self, name)
+            if not 0.0 < v <= 1.0:
+                raise ReconstructionError(f"BeamParams.{name} must be in (0, 1], got {v}")
+        if not 0.0 < self.taubin_lambda < 1.0 or not self.taubin_mu < -self.taubin_lambda:
+            raise ReconstructionError(
+                "BeamParams needs 0 < taubin_lambda < 1 and taubin_mu < -taubin_lambda, "
+                f"got {self.taubin_lambda}, {self.taubin_mu}"
+            )
+        if self.taubin_iterations < 0 or self.min_points < 1:
+            raise ReconstructionError(
+                "BeamParams needs taubin_iterations >= 0 and min_points >= 1, "
+                f"got {self.taubin_iterations}, {self.min_points}"
+            )
+
+
+@dataclass(frozen=True)
+class BeamReconstruction:
+    """What :func:`reconstruct_beam` returns.
+
+    Attributes
+    ----------
+    section : (M, 2) float64, (z, y) metres: the section curve from bottom to top (M = 0 when
+        nothing could be reconstructed)
+    n_points : int, beam points used
+    notes : what could not be reconstructed, in words
+    """
+
+    section: np.ndarray
+    n_points: int
+    notes: tuple[str, ...] = ()
+
+
+def _check_length(length: float) -> float:
+    try:
+        v = float(length)
+    except (TypeError, ValueError) as exc:
+        raise ReconstructionError(f"length must be a number, got {length!r}") from exc
+    if not (math.isfinite(v) and v > 0):
+        raise ReconstructionError(f"length must be > 0, got {length!r}")
+    return v
+
+
+def _filled_height(points: np.ndarray, length: float, params: BeamParams) -> float:
+    """Height (m) of the tallest region of rows filled by points (see :class:`BeamParams`)."""
+    p = params
+    x, y = points[:, 0], points[:, 1]
+    keep = (x > p.type_margin) & (x < length - p.type_margin)
+    x, y = x[keep], y[keep]
+    if len(x) == 0:
+        return 0.0
+    nx = max(1, int(math.ceil((length - 2 * p.type_margin) / p.cell)))
+    ix = np.minimum(((x - p.type_margin) / p.cell).astype(np.int64), nx - 1)
+    y0 = float(y.min())
+    iy = ((y - y0) / p.cell).astype(np.int64)
+    ny = int(iy.max()) + 1
+    grid = np.zeros((ny, nx), dtype=bool)
+    grid[iy, ix] = True
+    # Occupancy of each row over its band of rows.
+    k = max(1, int(round(p.band / p.cell)))
+    cum = np.vstack([np.zeros((1, nx)), np.cumsum(grid, axis=0)])
+    lo = np.clip(np.arange(ny) - k // 2, 0, ny)
+    hi = np.clip(lo + k, 0, ny)
+    occupancy = ((cum[hi] - cum[lo]) > 0).mean(axis=1)
+    occupied = np.flatnonzero(occupancy >= p.row_share)
+    if len(occupied) == 0:
+        return 0.0
+    # Regions of occupied rows, bridging short gaps.
+    breaks = np.flatnonzero(np.diff(occupied) * p.cell > p.max_gap + p.cell)
+    starts = np.concatenate([[0], breaks + 1])
+    ends = np.concatenate([breaks, [len(occupied) - 1]])
+    best = 0.0
+    for a, b in zip(occupied[starts], occupied[ends], strict=True):
+        if occupancy[a : b + 1].mean() >= p.filled_share:
+            best = max(best, (b - a + 1) * p.cell)
+    return best
+
+
+def unit_type(points: np.ndarray, length: float, params: BeamParams = BeamParams()) -> str:
+    """Tell a beam unit from a pipe unit (§4.4: beams fill a relatively large rectangle).
+
+    Parameters
+    ----------
+    points : (N, 3) float64, unit coordinates, metres
+        Superimposed unit points (pole points may be included: points within
+        ``params.type_margin`` of the poles are ignored).
+    length : float, metres
+        Unit length.
+    params : BeamParams
+
+    Returns
+    -------
+    "beam" when a region of at least ``min_height`` is filled by points, else "pipe".
+
+    Raises
+    ------
+    ReconstructionError
+        If points are not (N, 3) finite or length is not > 0.
+
+    References
+    ----------
+    Matsumoto, Mori, Masuda (2019). Extraction and shape reconstruction of guardrails using
+    mobile mapping data. ISPRS Archives XLII-2/W13, §4.4.
+    """
+    pts = check_unit_points(points)
+    length = _check_length(length)
+    if _filled_height(pts, length, params) < params.min_height:
+        return "pipe"
+    return "beam" if _open_share(pts, length, params) <= params.max_open_share else "pipe"
+
+
+def _open_share(points: np.ndarray, length: float, params: BeamParams) -> float:
+    """Share of the x bins (``cell / 2`` wide) between the margins that hold no point, among the
+    points of the middle half of the heights (rails above and below would cover every x)."""
+    p = params
+    inside = (points[:, 0] > p.type_margin) & (points[:, 0] < length - p.type_margin)
+    x, y = points[inside, 0], points[inside, 1]
+    if len(y):
+        low, high = np.percentile(y, [25, 75])
+        x = x[(y >= low) & (y <= high)]
+    width = p.cell / 2
+    n_bins = max(1, int(math.floor((length - 2 * p.type_margin) / width)))
+    if len(x) == 0:
+        return 1.0
+    counts = np.bincount(
+        np.minimum(((x - p.type_margin) / width).astype(np.int64), n_bins - 1), minlength=n_bins
+    )
+    return float((counts == 0).mean())
+
+
+def reconstruct_beam(
+    points: np.ndarray,
+    length: float,
+    pole_radius: float,
+    params: BeamParams = BeamParams(),
+) -> BeamReconstruction:
+    """The section curve of a beam unit from superimposed unit points.
+
+    Parameters
+    ----------
+    points : (N, 3) float64, unit coordinates, metres
+        Superimposed points of the units of one run; pole points may be included.
+    length : float, metres
+        Unit length.
+    pole_radius : float, metres
+        Radius of the posts.
+    params : BeamParams
+
+    Returns
+    -------
+    BeamReconstruction
+        ``section`` (M, 2) (z, y) metres from bottom to top: the centre of the scanned face in
+        each 10 mm horizontal slice, smoothed. It is the front face, ``thickness / 2``
+        (1.2-1.6 mm) in front of the plate's mid-surface, which is left uncorrected.
+
+    Raises
+    ------
+    ReconstructionError
+        If points are not (N, 3) finite, or length / pole_radius are out of range.
+
+    References
+    ----------
+    Matsumoto, Mori, Masuda (2019). Extraction and shape reconstruction of guardrails using
+    mobile mapping data. ISPRS Archives XLII-2/W13, §4.4, Fig. 18, 19.
+    Taubin, G. (1995). A signal processing approach to fair surface design. SIGGRAPH '95.
+    """
+    pts = check_unit_points(points)
+    length = _check_length(length)
+    try:
+        pole_radius = float(pole_radius)
+    except (TypeError, ValueError) as exc:
+        raise ReconstructionError(f"pole_radius must be a number, got {pole_radius!r}") from exc
+    if not (math.isfinite(pole_radius) and pole_radius >= 0):
+        raise ReconstructionError(f"pole_radius must be >= 0, got {pole_radius!r}")
+    p = params
+    empty = np.zeros((0, 2))
+    # §4.4: points on poles are eliminated.
+    x0 = pole_radius + p.pole_margin
+    pts = pts[(pts[:, 0] > x0) & (pts[:, 0] < length - x0)]
+    if len(pts) == 0:
+        return BeamReconstruction(empty, 0, ("no points between the posts: no beam section",))
+    # §4.4: 10 mm horizontal slices, the centre of each.
+    section, used = _slice_centres(pts, p)
+    if len(section) >= 2:
+        # Posts and blockouts stand behind the beam: drop points behind its rear-most centre.
+        front = pts[:, 2] >= section[:, 0].min() - p.post_gap
+        if not front.all():
+            pts = pts[front]
+            section, used = _slice_centres(pts, p)
+    notes: list[str] = []
+    if len(section) < 2:
+        notes.append(
+            f"only {len(section)} horizontal slices hold {p.min_points}+ points: no beam section"
+        )
+        return BeamReconstruction(empty, int(used), tuple(notes))
+    gaps = np.flatnonzero(np.diff(section[:, 1]) > p.shadow_gap)
+    if len(gaps):
+        spans = ", ".join(f"{section[g, 1]:.2f}-{section[g + 1, 1]:.2f} m" for g in gaps)
+        how = "mirrored from the ridges' upper flanks" if p.fill_shadowed else "bridged straight"
+        notes.append(f"no points at heights {spans} (shadowed flanks): {how}")
+    if p.fill_shadowed:
+        section = _fill_shadowed(section, p)
+    # §4.4: the polyline is smoothed by the low-pass filter.
+    section = taubin_smooth(
+        section, lam=p.taubin_lambda, mu=p.taubin_mu, iterations=p.taubin_iterations
+    )
+    return BeamReconstruction(section, int(used), tuple(notes))
+
+
+def _slice_centres(pts: np.ndarray, p: BeamParams) -> tuple[np.ndarray, int]:
+    """(z median, y mean) of each 10 mm slice in y with ``min_points`` points, bottom to top."""
+    y0 = float(pts[:, 1].min())
+    s = ((pts[:, 1] - y0) / p.slice_interval).astype(np.int64)
+    order = np.argsort(s, kind="stable")
+    s_sorted = s[order]
+    bounds = np.flatnonzero(np.diff(s_sorted)) + 1
+    groups = np.split(order, bounds)
+    counts = np.array([len(g) for g in groups])
+    # Slices with few points are the edge of a shadow (a grazing view): left out.
+    ok = counts >= max(p.min_points, p.sparse_share * float(np.median(counts)))
+    if not ok.any():
+        return np.zeros((0, 2)), 0
+    z = np.array([np.median(pts[g, 2]) for g, k in zip(groups, ok, strict=True) if k])
+    y = np.array([pts[g, 1].mean() for g, k in zip(groups, ok, strict=True) if k])
+    return np.column_stack([z, y]), int(counts[ok].sum())
+
+
+def _fill_shadowed(section: np.ndarray, p: BeamParams) -> np.ndarray:
+    """Fill shadowed lower flanks of ridges by mirroring the upper flank about the crest.
+
+    section : (M, 2) (z, y) from bottom to top. A gap (a step in y above ``shadow_gap``) whose
+    upper side climbs to a crest (a local maximum of z) is filled with the crest's upper flank
+    mirrored about the crest height; so is the stretch below the lowest vertex when that vertex
+    lies in the upper half of the section's depth (the plate cannot end at a ridge).
+    """
+    z, y = section[:, 0], section[:, 1]
+    z_mid = 0.5 * (z.min() + z.max())
+    pieces = [section]
+
+    def crest_above(i: int) -> int:
+        j = i
+        while j + 1 < len(z) and z[j + 1] >= z[j]:
+            j += 1
+        return j
+
+    def mirrored(c: int, lo: float, hi: float) -> np.ndarray:
+        up = section[c:]
+        m = np.column_stack([up[:, 0], 2.0 * y[c] - up[:, 1]])
+        return m[(m[:, 1] > lo) & (m[:, 1] < hi)]
+
+    for g in np.flatnonzero(np.diff(y) > p.shadow_gap):
+        c = crest_above(int(g) + 1)
+        if c > g + 1 or z[g + 1] > z_mid:
+            pieces.append(mirrored(c, y[g], y[g + 1]))
+    if z[0] > z_mid:
+        c = crest_above(0)
+        # mirror down to the next valley above the crest (where the upper flank ends)
+        k = c
+        while k + 1 < len(z) and z[k + 1] <= z[k]:
+            k += 1
+        pieces.append(mirrored(c, 2.0 * y[c] - y[k], y[0]))
+    out = np.vstack(pieces)
+    return out[np.argsort(out[:, 1], kind="stable")]

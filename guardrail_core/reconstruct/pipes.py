@@ -1,0 +1,1035 @@
+"""Skeletons and radii of the pipes of a unit shape (Matsumoto et al. 2019, §4.3).
+
+Input: the superimposed points of many units of one run, in unit coordinates
+(:mod:`guardrail_core.reconstruct.unit_frame`: x along the unit from its first pole's axis,
+y above the ground line, z toward the road; metres). Output: one :class:`Pipe` per pipe of the
+unit shape, its axis polyline in the same coordinates.
+
+The steps follow §4.3:
+
+1. points within the poles (x near 0 and ``length``) are dropped;
+2. vertical pipes: a histogram of x; contiguous regions above a threshold are candidate vertical
+   pipes; the diameter is the width holding a share of their points, the skeleton sits at the
+   centre of that width and spans the points' height (Fig. 14, 15);
+3. their points are removed; the rest is cut into 30 mm slices along x, each slice triangulated
+   (2-D Delaunay on (x, y)), edges longer than a cut length removed, and the centre of each
+   connected component taken (Fig. 16 a-c);
+4. centres of consecutive slices are joined into polylines (Fig. 16 d), predicting along the
+   current direction so that crossing pipes continue straight through the crossing;
+5. polylines are smoothed by Taubin's low-pass filter, fitted by a straight line when nearly
+   straight, snapped to horizontal when nearly horizontal;
+6. ends near a pole are extended to the pole axis; ends near another pipe are extended to their
+   intersection;
+7. the radius and the axis depth z of each pipe are measured from its points.
+
+Geometry of the points on a pipe (used in 2 and 7): the scanner sees the +z face. Rays sample a
+pipe about uniformly in the offset across it, so the signed in-plane offsets of its points from the
+axis (x for a vertical pipe, the normal offset in (x, y) for the others) are close to uniform on
+[-r, r] (slightly squeezed on the far side when the scanner looks down on the pipe). The central
+``radius_share`` of the offsets then spans about ``2 * radius_share * r``: the radius is that
+half-width divided by the share, and the axis is the midpoint of the two quantiles (not the mean,
+which the look-down angle biases toward the scanner by a few mm). A point at offset ``o`` lies
+``sqrt(r**2 - o**2)`` in front of the axis, which gives the axis depth z.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import Delaunay, QhullError, cKDTree
+
+from guardrail_core.errors import ReconstructionError
+from guardrail_core.reconstruct.model import PIPE_KINDS, Pipe
+from guardrail_core.reconstruct.smoothing import taubin_smooth
+
+_FORBIDDEN = 1e9  # assignment cost of a centre out of a polyline's reach
+
+__all__ = [
+    "PipeHistogram",
+    "PipeParams",
+    "PipeReconstruction",
+    "reconstruct_pipes",
+    "check_unit_points",
+]
+
+
+@dataclass(frozen=True)
+class PipeParams:
+    """Thresholds of the pipe reconstruction (§4.3). Lengths in metres, angles in degrees.
+
+    Attributes
+    ----------
+    pole_margin : float, m
+        Points with x within ``pole_radius + pole_margin`` of a pole axis (x = 0, x = length) are
+        dropped as pole points (and points beyond the poles with them).
+    histogram_bin : float, m
+        Bin width of the x histogram of vertical-pipe detection (Fig. 14).
+    histogram_factor : float
+        The histogram threshold is ``histogram_factor`` times the median bin count (the level the
+        horizontal pipes give everywhere), and at least ``histogram_min_count``.
+    histogram_min_count : float, points per bin
+        Floor of the histogram threshold (sparse clouds have a median of 0 or 1).
+    radius_share : float in (0, 1)
+        The paper's "certain percentage": the share of a pipe's points that its diameter holds.
+        The central ``radius_share`` of the signed offsets spans the diameter ``2 r``; for offsets
+        uniform on [-r, r] its half-width is ``radius_share * r``, so ``r = half_width / share``.
+    vertical_min_length : float, m
+        A vertical pipe's points must cover at least this height without a gap.
+    vertical_gap : float, m
+        The largest gap in y within the points of one vertical pipe.
+    vertical_angle : float, deg
+        A histogram peak whose points lean more than this from the vertical is no vertical pipe
+        (the steep foot of an arch); a straight skeleton within it of the vertical is vertical.
+    slice_interval : float, m
+        Width of the slices along x (§4.3: 30 mm).
+    max_edge : float, m
+        Edges of a slice's Delaunay wireframe longer than this are cut before its connected
+        components are taken.
+    link_distance : float, m
+        A centre joins a polyline when it lies within this distance (across the polyline's
+        direction) of the position predicted along the polyline.
+    link_gap : float, m
+        Polylines bridge runs of empty slices up to this length in x (sparse clouds).
+    link_max_slope : float, dy/dx
+        Steepest direction a polyline of one centre may continue in.
+    link_same_angle : float, deg
+        Two polylines that want the same centre are one pipe (a duplicate) when their directions
+        differ by less than this; else they cross and share it.
+    direction_window : float, m
+        The direction of a polyline is fitted to its centres within this x span of its end.
+    taubin_lambda, taubin_mu : float
+        Taubin's filter factors (lambda > 0, mu < -lambda).
+    taubin_iterations : int
+        Taubin's filter iterations.
+    straight_tolerance : float, m
+        A polyline is a straight line when ``straight_share`` of its smoothed centres lie within
+        this distance of their fitted line.
+    straight_share : float in (0, 1]
+        See ``straight_tolerance`` (below 1: the bumps where other pipes join do not count).
+    horizontal_angle : float, deg
+        A straight line within this angle of the horizontal is a horizontal pipe.
+    pole_extension : float, m
+        Ends within this x distance of a pole axis are extended to it.
+    join_distance : float, m
+        Ends within this distance of another pipe (or of its extension) are extended or trimmed
+        to the intersection.
+    merge_gap : float, m
+        Largest gap (in x, and end to start) between two pieces of one pipe that are joined.
+    merge_angle : float, deg
+        Largest turn between a piece's end direction, the step across a gap and the next piece's
+        start direction for the two to be joined.
+    min_points : int
+        Fewest points a pipe must hold.
+    min_length : float, m
+        Shortest skeleton (before extension) kept as a pipe.
+    assign_margin : float, m
+        Points within ``r + assign_margin`` of an axis (in x, y) belong to the pipe.
+    measure_step : float, m
+        Spacing of the skeleton samples that point offsets are measured against.
+    """
+
+    pole_margin: float = 0.015
+    histogram_bin: float = 0.005
+    histogram_factor: float = 2.5
+    histogram_min_count: float = 4.0
+    radius_share: float = 0.94
+    vertical_min_length: float = 0.1
+    vertical_gap: float = 0.06
+    vertical_angle: float = 4.0
+    slice_interval: float = 0.03
+    max_edge: float = 0.03
+    link_distance: float = 0.04
+    link_gap: float = 0.15
+    link_max_slope: float = 3.0
+    link_same_angle: float = 10.0
+    direction_window: float = 0.15
+    taubin_lambda: float = 0.5
+    taubin_mu: float = -0.53
+    taubin_iterations: int = 10
+    straight_tolerance: float = 0.01
+    straight_share: float = 0.75
+    horizontal_angle: float = 3.0
+    pole_extension: float = 0.35
+    join_distance: float = 0.25
+    merge_gap: float = 0.3
+    merge_angle: float = 50.0
+    min_points: int = 15
+    min_length: float = 0.1
+    assign_margin: float = 0.01
+    measure_step: float = 0.005
+
+    def __post_init__(self) -> None:
+        positive = (
+            "histogram_bin",
+            "histogram_factor",
+            "vertical_min_length",
+            "vertical_gap",
+            "slice_interval",
+            "max_edge",
+            "link_distance",
+            "link_gap",
+            "link_max_slope",
+            "direction_window",
+            "straight_tolerance",
+            "min_length",
+            "merge_gap",
+            "measure_step",
+        )
+        for name in positive:
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ReconstructionError(f"PipeParams.{name} must be > 0, got {value}")
+        non_negative = (
+            "pole_margin",
+            "histogram_min_count",
+            "pole_extension",
+            "join_distance",
+            "assign_margin",
+        )
+        for name in non_negative:
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ReconstructionError(f"PipeParams.{name} must be >= 0, got {value}")
+        if not 0.0 < self.straight_share <= 1.0:
+            raise ReconstructionError(
+                f"PipeParams.straight_share must be in (0, 1], got {self.straight_share}"
+            )
+        if not 0.0 < self.radius_share < 1.0:
+            raise ReconstructionError(
+                f"PipeParams.radius_share must be in (0, 1), got {self.radius_share}"
+            )
+        for name in ("vertical_angle", "horizontal_angle", "link_same_angle", "merge_angle"):
+            value = getattr(self, name)
+            if not 0.0 <= value < 90.0:
+                raise ReconstructionError(
+                    f"PipeParams.{name} must be in [0, 90) degrees, got {value}"
+                )
+        if not 0.0 < self.taubin_lambda < 1.0 or not self.taubin_mu < -self.taubin_lambda:
+            raise ReconstructionError(
+                "PipeParams needs 0 < taubin_lambda < 1 and taubin_mu < -taubin_lambda, "
+                f"got {self.taubin_lambda}, {self.taubin_mu}"
+            )
+        if self.taubin_iterations < 0 or self.min_points < 1:
+            raise ReconstructionError(
+                "PipeParams needs taubin_iterations >= 0 and min_points >= 1, "
+                f"got {self.taubin_iterations}, {self.min_points}"
+            )
+
+
+@dataclass(frozen=True)
+class PipeHistogram:
+    """The x histogram of vertical-pipe detection (§4.3, Fig. 14).
+
+    Attributes
+    ----------
+    edges : (B + 1,) float64, metres, unit x
+    counts : (B,) int64, points per bin (pole points excluded)
+    threshold : float, points per bin: regions above it are vertical-pipe candidates
+    """
+
+    edges: np.ndarray
+    counts: np.ndarray
+    threshold: float
+
+
+@dataclass(frozen=True)
+class PipeReconstruction:
+    """What :func:`reconstruct_pipes` returns.
+
+    Attributes
+    ----------
+    pipes : the reconstructed pipes, axes in unit coordinates
+    histogram : the x histogram and its threshold
+    notes : what could not be reconstructed, in words
+    """
+
+    pipes: tuple[Pipe, ...]
+    histogram: PipeHistogram
+    notes: tuple[str, ...] = ()
+
+
+@dataclass
+class _Skel:
+    """A pipe under construction: a 2-D skeleton in (x, y) and its points."""
+
+    xy: np.ndarray  # (K, 2)
+    kind: str
+    idx: np.ndarray  # indices into the non-pole points
+    radius: float = 0.0
+    z: float = 0.0
+    n_points: int = 0
+    extras: dict = field(default_factory=dict)
+
+
+def check_unit_points(points: np.ndarray, name: str = "points") -> np.ndarray:
+    """Validate an (N, 3) array of finite unit coordinates; return it as float64."""
+    try:
+        p = np.asarray(points, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ReconstructionError(f"{name} must be an (N, 3) array of numbers: {exc}") from exc
+    if p.ndim != 2 or p.shape[1] != 3:
+        raise ReconstructionError(f"{name} must have shape (N, 3) (unit x, y, z), got {p.shape}")
+    if not np.all(np.isfinite(p)):
+        raise ReconstructionError(f"{name} holds NaN or infinite coordinates")
+    return p
+
+
+def _check_scalar(value: float, name: str, *, positive: bool) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError) as exc:
+        raise ReconstructionError(f"{name} must be a number, got {value!r}") from exc
+    if not math.isfinite(v) or (v <= 0 if positive else v < 0):
+        raise ReconstructionError(f"{name} must be {'> 0' if positive else '>= 0'}, got {value!r}")
+    return v
+
+
+def reconstruct_pipes(
+    points: np.ndarray,
+    length: float,
+    pole_radius: float,
+    params: PipeParams = PipeParams(),
+) -> PipeReconstruction:
+    """Reconstruct the pipes of a unit shape from superimposed unit points.
+
+    Parameters
+    ----------
+    points : (N, 3) float64, unit coordinates, metres
+        Superimposed points of many units of one run; pole points may be included (they are
+        dropped by x).
+    length : float, metres
+        Unit length (the second pole's axis is at x = length).
+    pole_radius : float, metres
+        Radius of the poles.
+    params : PipeParams
+        Thresholds.
+
+    Returns
+    -------
+    PipeReconstruction
+        ``pipes`` with axis polylines (K, 3) in unit coordinates (z: the axis depth), radii,
+        kinds (:data:`PIPE_KINDS`) and point counts; the x ``histogram``; ``notes``.
+
+    Raises
+    ------
+    ReconstructionError
+        If points are not (N, 3) finite, or length / pole_radius are out of range.
+
+    References
+    ----------
+    Matsumoto, Mori, Masuda (2019). Extraction and shape reconstruction of guardrails using
+    mobile mapping data. ISPRS Archives XLII-2/W13, §4.3, Fig. 14-16.
+    Taubin, G. (1995). A signal processing approach to fair surface design. SIGGRAPH '95.
+    """
+    pts = check_unit_points(points)
+    length = _check_scalar(length, "length", positive=True)
+    pole_radius = _check_scalar(pole_radius, "pole_radius", positive=False)
+    p = params
+    notes: list[str] = []
+
+    # §4.3: points within the poles are eliminated.
+    x0 = pole_radius + p.pole_margin
+    x1 = length - x0
+    if x1 <= x0:
+        raise ReconstructionError(
+            f"the unit (length {length} m) is shorter than its two poles and margins ({2 * x0} m)"
+        )
+    pts = pts[(pts[:, 0] > x0) & (pts[:, 0] < x1)]
+
+    # §4.3, Fig. 14: histogram of points along x.
+    n_bins = max(1, int(math.ceil((x1 - x0) / p.histogram_bin)))
+    edges = x0 + p.histogram_bin * np.arange(n_bins + 1)
+    counts = np.bincount(
+        np.minimum(((pts[:, 0] - x0) / p.histogram_bin).astype(np.int64), n_bins - 1),
+        minlength=n_bins,
+    ).astype(np.int64)
+    threshold = max(p.histogram_factor * float(np.median(counts)), p.histogram_min_count)
+    histogram = PipeHistogram(edges, counts, float(threshold))
+    if len(pts) == 0:
+        notes.append("no points between the poles: no pipe reconstructed")
+        return PipeReconstruction((), histogram, tuple(notes))
+
+    # §4.3, Fig. 15: vertical pipes at the histogram peaks.
+    verticals, vertical_mask = _vertical_pipes(pts, edges, counts, threshold, p)
+
+    # §4.3, Fig. 16(a): the points of the vertical pipes are removed.
+    rest_idx = np.flatnonzero(~vertical_mask)
+    others = _non_vertical_pipes(pts, rest_idx, x0, p, notes)
+
+    skels = verticals + others
+    # §4.3: ends extended to the poles, and to the intersection of close ends.
+    _extend_and_join(skels, length, p)
+    # Radius and depth of each pipe from its points.
+    pipes = []
+    _measure_all(pts, skels, p)
+    for s in skels:
+        if s.n_points < p.min_points:
+            notes.append(
+                f"a {s.kind} pipe near x={s.xy[:, 0].mean():.2f} m, y={s.xy[:, 1].mean():.2f} m "
+                f"kept only {s.n_points} points: dropped"
+            )
+            continue
+        axis = np.column_stack([s.xy, np.full(len(s.xy), s.z)])
+        kind = s.kind if s.kind in PIPE_KINDS else "curved"
+        pipes.append(Pipe(axis=axis, radius=float(s.radius), kind=kind, n_points=int(s.n_points)))
+    if not pipes:
+        notes.append(f"no pipe found among {len(pts)} points between the poles")
+    pipes.sort(
+        key=lambda q: (PIPE_KINDS.index(q.kind), -float(q.axis[:, 1].mean()), float(q.axis[0, 0]))
+    )
+    return PipeReconstruction(tuple(pipes), histogram, tuple(notes))
+
+
+# ----------------------------------------------------------------------------------------------
+# Vertical pipes
+# ----------------------------------------------------------------------------------------------
+
+
+def _central_quantiles(values: np.ndarray, share: float) -> tuple[float, float]:
+    lo, hi = np.quantile(values, [(1.0 - share) / 2.0, (1.0 + share) / 2.0])
+    return float(lo), float(hi)
+
+
+def _longest_chain(y: np.ndarray, gap: float) -> tuple[float, float]:
+    """The y extent of the longest run of sorted ``y`` without a gap above ``gap``."""
+    ys = np.sort(y)
+    breaks = np.flatnonzero(np.diff(ys) > gap)
+    starts = np.concatenate([[0], breaks + 1])
+    ends = np.concatenate([breaks, [len(ys) - 1]])
+    k = int(np.argmax(ys[ends] - ys[starts]))
+    return float(ys[starts[k]]), float(ys[ends[k]])
+
+
+def _vertical_pipes(
+    pts: np.ndarray, edges: np.ndarray, counts: np.ndarray, threshold: float, p: PipeParams
+) -> tuple[list[_Skel], np.ndarray]:
+    """Vertical pipes from the contiguous regions of the x histogram above ``threshold``."""
+    above = np.concatenate([[False], counts > threshold, [False]])
+    starts = np.flatnonzero(~above[:-1] & above[1:])
+    stops = np.flatnonzero(above[:-1] & ~above[1:])
+    removed = np.zeros(len(pts), dtype=bool)
+    skels: list[_Skel] = []
+    tan_tol = math.tan(math.radians(p.vertical_angle))
+    x, y = pts[:, 0], pts[:, 1]
+    for a, b in zip(starts, stops, strict=True):
+        lo, hi = edges[a], edges[b]
+        centre, half = 0.5 * (lo + hi), 0.5 * (hi - lo) + p.histogram_bin
+        sel = np.zeros(len(pts), dtype=bool)
+        for _ in range(2):  # the window follows the estimated pipe width
+            sel = np.abs(x - centre) <= half
+            if sel.sum() < p.min_points:
+                break
+            y0, y1 = _longest_chain(y[sel], p.vertical_gap)
+            if y1 - y0 < p.vertical_min_length:
+                sel[:] = False
+                break
+            inner = sel & (y > y0 + p.vertical_gap) & (y < y1 - p.vertical_gap)
+            inner &= ~_horizontal_bands(y, inner, p)
+            if inner.sum() < p.min_points:
+                sel[:] = False
+                break
+            # A vertical pipe stands straight: x does not drift with y.
+            slope = np.polyfit(y[inner], x[inner], 1)[0]
+            if abs(slope) > tan_tol:
+                sel[:] = False
+                break
+            qlo, qhi = _central_quantiles(x[inner], p.radius_share)
+            centre = 0.5 * (qlo + qhi)
+            radius = 0.5 * (qhi - qlo) / p.radius_share
+            half = radius + p.assign_margin
+        if not sel.any():
+            continue
+        y0, y1 = _longest_chain(y[sel], p.vertical_gap)
+        band = sel & (y >= y0) & (y <= y1)
+        removed |= band
+        xy = np.array([[centre, y0], [centre, y1]])
+        skels.append(_Skel(xy=xy, kind="vertical", idx=np.flatnonzero(band)))
+    return skels, removed
+
+
+def _horizontal_bands(y: np.ndarray, sel: np.ndarray, p: PipeParams) -> np.ndarray:
+    """Points of ``sel`` in y bands much denser than the median (horizontal pipes crossing)."""
+    ys = y[sel]
+    out = np.zeros(len(y), dtype=bool)
+    if len(ys) == 0:
+        return out
+    b = np.floor((y - ys.min()) / p.slice_interval).astype(np.int64)
+    cnt = np.bincount(b[sel])
+    dense = cnt > p.histogram_factor * max(np.median(cnt[cnt > 0]), 1.0)
+    out[sel] = dense[b[sel]]
+    return out
+
+
+# ----------------------------------------------------------------------------------------------
+# Non-vertical pipes: slices, components, centres, polylines
+# ----------------------------------------------------------------------------------------------
+
+
+def _slice_components(xy: np.ndarray, x0: float, p: PipeParams) -> tuple[np.ndarray, np.ndarray]:
+    """Connected components of each slice's Delaunay wireframe (§4.3, Fig. 16 b, c).
+
+    Returns the slice index (N,) of each point and its component label (N,). The slices are
+    triangulated in one Qhull call with the slices pulled apart along x by more than ``max_edge``:
+    every edge crossing a slice boundary is then longer than the cut and removed, and the
+    components within a slice are those of its own Delaunay wireframe cut at ``max_edge``
+    (both are the single-linkage clusters at ``max_edge``, which the Delaunay graph contains).
+    """
+    n = len(xy)
+    s = np.floor((xy[:, 0] - x0) / p.slice_interval).astype(np.int64)
+    if n < 4:
+        rows, cols = np.triu_indices(n, 1)
+    else:
+        spread = xy.copy()
+        spread[:, 0] += s * (p.slice_interval + 4.0 * p.max_edge)
+        try:
+            tri = Delaunay(spread, qhull_options="QJ")
+            e = np.concatenate(
+                [tri.simplices[:, [0, 1]], tri.simplices[:, [1, 2]], tri.simplices[:, [2, 0]]]
+            )
+        except QhullError:  # all points on a line
+            order = np.argsort(spread[:, 0] + spread[:, 1])
+            e = np.column_stack([order[:-1], order[1:]])
+        rows, cols = e[:, 0], e[:, 1]
+    d = np.linalg.norm(xy[rows] - xy[cols], axis=1)
+    keep = (d <= p.max_edge) & (s[rows] == s[cols])
+    graph = coo_matrix((np.ones(int(keep.sum())), (rows[keep], cols[keep])), shape=(n, n))
+    _, labels = connected_components(graph, directed=False)
+    return s, labels
+
+
+class _Track:
+    """A polyline being linked across slices: one centre per slice it has data in."""
+
+    def __init__(self, slice_index: int, x: float, y: float, comp: int, w: float) -> None:
+        self.s = [slice_index]
+        self.x = [x]
+        self.y = [y]
+        self.w = [w]
+        self.comps = [[comp]]
+        self.shared = [False]
+        self.last_own_x = x  # x of the last centre not shared with another polyline
+
+    def predict(self, x: float, p: PipeParams) -> tuple[float, float, float]:
+        """Predicted y at ``x``, the allowed |dy| and the slope (nan while unknown).
+
+        The direction is a weighted least-squares fit to the polyline's own centres (not shared
+        at a crossing) within ``direction_window`` of its last own centre; it is trusted once they
+        span half the window, before that the polyline may turn up to ``link_max_slope``.
+        """
+        start = self.last_own_x - p.direction_window
+        own = [k for k in range(len(self.x)) if not self.shared[k] and self.x[k] >= start]
+        if len(own) >= 2 and self.x[own[-1]] - self.x[own[0]] >= 0.5 * p.direction_window:
+            xs = np.array([self.x[k] for k in own])
+            ys = np.array([self.y[k] for k in own])
+            ws = np.array([self.w[k] for k in own])
+            mx, my = np.average(xs, weights=ws), np.average(ys, weights=ws)
+            sxx = float(np.sum(ws * (xs - mx) ** 2))
+            slope = float(np.sum(ws * (xs - mx) * (ys - my))) / sxx if sxx > 0 else 0.0
+            slope = min(max(slope, -p.link_max_slope), p.link_max_slope)
+            return my + slope * (x - mx), p.link_distance * math.sqrt(1.0 + slope * slope), slope
+        return self.y[-1], p.link_distance + p.link_max_slope * abs(x - self.x[-1]), math.nan
+
+    def add(self, slice_index: int, x: float, y: float, comp: int, w: float, shared: bool) -> None:
+        self.s.append(slice_index)
+        self.x.append(x)
+        self.y.append(y)
+        self.w.append(w)
+        self.comps.append([comp])
+        self.shared.append(shared)
+        if not shared:
+            self.last_own_x = x
+
+
+def _link_centres(
+    cs: np.ndarray, cx: np.ndarray, cy: np.ndarray, cw: np.ndarray, p: PipeParams
+) -> list[_Track]:
+    """Join component centres of consecutive slices into polylines (§4.3, Fig. 16 d).
+
+    Slice by slice, every active polyline takes the centre nearest to its prediction within its
+    tolerance; a centre taken by two polylines (a crossing, or a pipe meeting another) is shared
+    and does not steer them. A polyline stops after ``link_gap`` without an own centre (so one
+    that runs into another pipe does not ride along it); centres nobody took start polylines.
+    """
+    tracks: list[_Track] = []
+    order = np.lexsort((cy, cs))
+    bounds = np.flatnonzero(np.diff(cs[order])) + 1
+    reach = p.link_gap + p.slice_interval
+    same_direction = math.tan(math.radians(p.link_same_angle))
+    for group in np.split(order, bounds):
+        if len(group) == 0:
+            continue
+        si = int(cs[group[0]])
+        xc = float(cx[group].mean())
+        gy = cy[group]
+        active = [t for t in tracks if xc - t.last_own_x <= reach and xc - t.x[-1] <= reach]
+        taken: dict[int, list[tuple[_Track, float]]] = {}
+        if active:
+            preds = np.array([t.predict(xc, p) for t in active])
+            cost = np.abs(gy[None, :] - preds[:, :1]) / preds[:, 1:2]
+            rows, cols = linear_sum_assignment(np.where(cost <= 1.0, cost, _FORBIDDEN))
+            assigned = np.zeros(len(active), dtype=bool)
+            for r, c in zip(rows, cols, strict=True):
+                if cost[r, c] <= 1.0:
+                    taken.setdefault(int(c), []).append((active[r], preds[r, 2]))
+                    assigned[r] = True
+            # A polyline left without a centre shares its nearest one: two pipes crossing or
+            # meeting fall into one component there. With the same direction it is a duplicate.
+            for r in np.flatnonzero(~assigned):
+                c = int(np.argmin(cost[r]))
+                if cost[r, c] > 1.0:
+                    continue
+                owner = taken.get(c)
+                if owner and math.isfinite(preds[r, 2]) and math.isfinite(owner[0][1]):
+                    if abs(preds[r, 2] - owner[0][1]) <= same_direction:
+                        continue
+                elif owner and len(active[r].x) < len(owner[0][0].x):
+                    continue
+                taken.setdefault(c, []).append((active[r], preds[r, 2]))
+        for j, g in enumerate(group):
+            claim = taken.get(j)
+            if claim:
+                for t, _ in claim:
+                    t.add(si, float(cx[g]), float(cy[g]), int(g), float(cw[g]), len(claim) > 1)
+            else:
+                tracks.append(_Track(si, float(cx[g]), float(cy[g]), int(g), float(cw[g])))
+    for t in tracks:  # trailing centres shared with another polyline are that one's
+        while len(t.x) > 1 and t.shared[-1]:
+            for lst in (t.s, t.x, t.y, t.w, t.comps, t.shared):
+                lst.pop()
+    return tracks
+
+
+def _polyline_length(xy: np.ndarray) -> float:
+    return float(np.linalg.norm(np.diff(xy, axis=0), axis=1).sum()) if len(xy) > 1 else 0.0
+
+
+def _fit_line(xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Total least squares line: (centroid (2,), unit direction (2,) with x >= 0)."""
+    c = xy.mean(axis=0)
+    _, _, vt = np.linalg.svd(xy - c, full_matrices=False)
+    d = vt[0]
+    if d[0] < 0 or (d[0] == 0 and d[1] < 0):
+        d = -d
+    return c, d
+
+
+def _non_vertical_pipes(
+    pts: np.ndarray, rest_idx: np.ndarray, x0: float, p: PipeParams, notes: list[str]
+) -> list[_Skel]:
+    if len(rest_idx) == 0:
+        return []
+    xy = pts[rest_idx, :2]
+    # §4.3, Fig. 16(b, c): 30 mm slices along x, Delaunay wireframes, connected components.
+    s, labels = _slice_components(xy, x0, p)
+    n_comp = int(labels.max()) + 1
+    cw = np.bincount(labels, minlength=n_comp).astype(np.float64)
+    cx = np.bincount(labels, xy[:, 0], n_comp) / cw
+    cy = np.bincount(labels, xy[:, 1], n_comp) / cw
+    cs = np.zeros(n_comp, dtype=np.int64)
+    cs[labels] = s
+    # §4.3, Fig. 16(d): neighbouring centres joined into polylines.
+    tracks = _link_centres(cs, cx, cy, cw, p)
+    tracks = _merge_tracks(tracks, p)
+    members = np.argsort(labels, kind="stable")
+    comp_start = np.concatenate([[0], np.cumsum(cw.astype(np.int64))])
+
+    skels: list[_Skel] = []
+    n_short = 0
+    for t in tracks:
+        comps = np.array([c for cc in t.comps for c in cc], dtype=np.int64)
+        n_pts = int(cw[comps].sum())
+        centres = np.column_stack([t.x, t.y])
+        if len(centres) < 2 or n_pts < p.min_points or _polyline_length(centres) < p.min_length:
+            n_short += 1
+            continue
+        idx = rest_idx[np.concatenate([members[comp_start[c] : comp_start[c + 1]] for c in comps])]
+        own_comps = [c for cc, sh in zip(t.comps, t.shared, strict=True) if not sh for c in cc]
+        own = np.concatenate(
+            [members[comp_start[c] : comp_start[c + 1]] for c in own_comps]
+            or [np.zeros(0, np.int64)]
+        )
+        skels.append(_shape_polyline(centres, np.asarray(t.shared), rest_idx[own], idx, pts, p))
+    skels = _merge_fragments(_merge_duplicates(skels, pts, p), pts, p)
+    if n_short:
+        notes.append(f"{n_short} short or sparse point chains were not taken as pipes")
+    return skels
+
+
+def _merge_tracks(tracks: list[_Track], p: PipeParams) -> list[_Track]:
+    """Join polylines broken by a gap or a sharp bend: one's end close to the other's start."""
+    merged = True
+    while merged:
+        merged = False
+        tracks.sort(key=lambda t: t.x[0])
+        for i, a in enumerate(tracks):
+            for j, b in enumerate(tracks):
+                if i == j or b.x[0] <= a.x[-1]:
+                    continue
+                gap = math.hypot(b.x[0] - a.x[-1], b.y[0] - a.y[-1])
+                if gap > p.join_distance or b.x[0] - a.x[-1] > p.link_gap + p.slice_interval:
+                    continue
+                # the joining step must continue both directions (no side branches)
+                da = _end_direction(np.column_stack([a.x, a.y]), p, end=True)
+                db = _end_direction(np.column_stack([b.x, b.y]), p, end=False)
+                step = np.array([b.x[0] - a.x[-1], b.y[0] - a.y[-1]]) / max(gap, 1e-9)
+                if da @ step < 0.7 or -db @ step < 0.7:
+                    continue
+                for k in range(len(b.x)):
+                    a.s.append(b.s[k])
+                    a.x.append(b.x[k])
+                    a.y.append(b.y[k])
+                    a.w.append(b.w[k])
+                    a.comps.append(b.comps[k])
+                    a.shared.append(b.shared[k])
+                tracks.pop(j)
+                merged = True
+                break
+            if merged:
+                break
+    return tracks
+
+
+def _end_direction(xy: np.ndarray, p: PipeParams, *, end: bool) -> np.ndarray:
+    """Unit direction leaving the polyline at its last (end=True) or first vertex."""
+    q = xy if end else xy[::-1]
+    if len(q) < 2:
+        return np.array([1.0, 0.0]) if end else np.array([-1.0, 0.0])
+    tip = q[-1]
+    d = np.linalg.norm(q - tip, axis=1)
+    k = np.flatnonzero(d >= min(p.direction_window / 2.0, d.max()))
+    base = q[k[-1]] if len(k) else q[0]
+    v = tip - base
+    nv = np.linalg.norm(v)
+    return v / nv if nv > 0 else (np.array([1.0, 0.0]) if end else np.array([-1.0, 0.0]))
+
+
+def _shape_polyline(
+    centres: np.ndarray,
+    shared: np.ndarray,
+    own_idx: np.ndarray,
+    idx: np.ndarray,
+    pts: np.ndarray,
+    p: PipeParams,
+) -> _Skel:
+    """§4.3: Taubin smoothing, straight-line fit, horizontal snap of one polyline."""
+    smooth = taubin_smooth(
+        centres, lam=p.taubin_lambda, mu=p.taubin_mu, iterations=p.taubin_iterations
+    )
+    fit_on = smooth[~shared] if (~shared).sum() >= 2 else smooth
+    c, d = _fit_line(fit_on)
+    normal = np.array([-d[1], d[0]])
+    dev = np.abs((smooth - c) @ normal)
+    extras = {"centres": centres, "shared": shared, "own": own_idx}
+    if np.quantile(dev, p.straight_share) > p.straight_tolerance:
+        return _Skel(xy=smooth, kind="curved", idx=idx, extras=extras)
+    # Straight: fit the line to the pipe's own points (components not shared at crossings).
+    pxy = pts[own_idx if len(own_idx) >= 2 else idx, :2]
+    c2, d2 = _fit_line(pxy)
+    off = (pxy - c2) @ np.array([-d2[1], d2[0]])
+    keep = np.abs(off) <= np.quantile(np.abs(off), 0.9) + p.link_distance * 0.25
+    if keep.sum() >= 2:
+        c2, d2 = _fit_line(pxy[keep])
+    angle = math.degrees(math.atan2(abs(d2[1]), abs(d2[0])))
+    t = (smooth - c2) @ d2
+    if angle <= p.horizontal_angle:
+        kind = "horizontal"
+        d2 = np.array([1.0, 0.0])
+        t = smooth[:, 0] - c2[0]
+    elif angle >= 90.0 - p.vertical_angle:
+        kind = "vertical"
+        d2 = np.array([0.0, 1.0])
+        t = smooth[:, 1] - c2[1]
+    else:
+        kind = "diagonal"
+    xy = c2 + np.outer([t.min(), t.max()], d2)
+    return _Skel(xy=xy, kind=kind, idx=idx, extras=extras)
+
+
+def _distance_to_polyline(q: np.ndarray, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distance (M,) of points q (M, 2) to the polyline xy (K, 2), and the signed offset (left +)."""
+    a, b = xy[:-1], xy[1:]
+    ab = b - a
+    L2 = np.maximum((ab**2).sum(1), 1e-18)
+    t = np.clip(((q[:, None, :] - a[None]) * ab[None]).sum(-1) / L2[None], 0.0, 1.0)
+    foot = a[None] + t[..., None] * ab[None]
+    diff = q[:, None, :] - foot
+    d2 = (diff**2).sum(-1)
+    k = np.argmin(d2, axis=1)
+    rows = np.arange(len(q))
+    dist = np.sqrt(d2[rows, k])
+    cross = ab[k, 0] * diff[rows, k, 1] - ab[k, 1] * diff[rows, k, 0]
+    return dist, np.where(cross >= 0, dist, -dist)
+
+
+def _merge_duplicates(skels: list[_Skel], pts: np.ndarray, p: PipeParams) -> list[_Skel]:
+    """Merge a skeleton that runs along a bigger one (two chains that followed one pipe)."""
+    skels = sorted(skels, key=lambda s: -len(s.idx))
+    kept: list[_Skel] = []
+    for s in skels:
+        probe = _resample(s.xy, p.slice_interval)
+        for i, k in enumerate(kept):
+            dist, _ = _distance_to_polyline(probe, k.xy)
+            if np.mean(dist <= p.link_distance) >= 0.5:
+                kept[i] = _union(k, s, pts, p)
+                break
+        else:
+            kept.append(s)
+    return kept
+
+
+def _union(a: _Skel, b: _Skel, pts: np.ndarray, p: PipeParams) -> _Skel:
+    """One skeleton from the centres and points of two pieces of a pipe."""
+    cen = np.vstack([a.extras["centres"], b.extras["centres"]])
+    sh = np.concatenate([a.extras["shared"], b.extras["shared"]])
+    order = np.argsort(cen[:, 0], kind="stable")
+    own = np.union1d(a.extras["own"], b.extras["own"])
+    return _shape_polyline(cen[order], sh[order], own, np.union1d(a.idx, b.idx), pts, p)
+
+
+def _merge_fragments(skels: list[_Skel], pts: np.ndarray, p: PipeParams) -> list[_Skel]:
+    """Join pieces of one pipe that the linking left apart (gaps, crossings, junctions).
+
+    Two straight pieces merge when they lie on one line (directions within ``horizontal_angle``,
+    ends within ``link_distance`` of the other's line) with at most ``merge_gap`` between them;
+    two pieces merge end to start when the gap is at most ``merge_gap`` and the step from one
+    to the other continues both directions (within ``merge_angle``).
+    """
+    cos_turn = math.cos(math.radians(p.merge_angle))
+    sin_line = math.sin(math.radians(max(p.horizontal_angle, 1e-3)))
+    changed = True
+    while changed:
+        changed = False
+        skels.sort(key=lambda k: float(k.xy[:, 0].min()))
+        for i in range(len(skels)):
+            a = skels[i]
+            for j in range(i + 1, len(skels)):
+                b = skels[j]
+                if _can_merge(a, b, p, cos_turn, sin_line):
+                    skels[i] = _union(a, b, pts, p)
+                    skels.pop(j)
+                    changed = True
+                    break
+            if changed:
+                break
+    return skels
+
+
+def _can_merge(a: _Skel, b: _Skel, p: PipeParams, cos_turn: float, sin_line: float) -> bool:
+    a_end, b_start = a.xy[-1], b.xy[0]
+    gap = b_start[0] - a_end[0]
+    if gap > p.merge_gap:
+        return False
+    if a.kind != "curved" and b.kind != "curved":  # straight pieces may overlap
+        da = (a.xy[-1] - a.xy[0]) / max(np.linalg.norm(a.xy[-1] - a.xy[0]), 1e-12)
+        db = (b.xy[-1] - b.xy[0]) / max(np.linalg.norm(b.xy[-1] - b.xy[0]), 1e-12)
+        if abs(da[0] * db[1] - da[1] * db[0]) > sin_line:
+            return False
+        na = np.array([-da[1], da[0]])
+        return bool(np.all(np.abs((b.xy - a.xy[0]) @ na) <= p.link_distance))
+    if gap < -p.link_distance:
+        return False
+    step = b_start - a_end
+    n = float(np.linalg.norm(step))
+    if n > p.merge_gap:
+        return False
+    ea = _end_direction(a.xy, p, end=True)
+    sb = -_end_direction(b.xy, p, end=False)
+    if n < 1e-9:
+        return bool(ea @ sb >= cos_turn)
+    step = step / n
+    return bool(ea @ step >= cos_turn and sb @ step >= cos_turn)
+
+
+def _resample(xy: np.ndarray, step: float) -> np.ndarray:
+    seg = np.linalg.norm(np.diff(xy, axis=0), axis=1)
+    cum = np.concatenate([[0.0], np.cumsum(seg)])
+    if cum[-1] <= 0:
+        return xy[:1].copy()
+    u = np.linspace(0.0, cum[-1], max(2, int(math.ceil(cum[-1] / step)) + 1))
+    return np.column_stack([np.interp(u, cum, xy[:, 0]), np.interp(u, cum, xy[:, 1])])
+
+
+# ----------------------------------------------------------------------------------------------
+# Extension to poles and intersections
+# ----------------------------------------------------------------------------------------------
+
+
+def _ray_polyline(
+    e: np.ndarray, d: np.ndarray, xy: np.ndarray, ext: float
+) -> tuple[float, float, int]:
+    """Intersection of the line e + s d with the polyline xy, its end segments extended by ``ext``.
+
+    Returns (s, t, k): the ray parameter, the segment parameter and segment index of the
+    intersection closest to e (|s| smallest), or (nan, nan, -1).
+    """
+    a, b = xy[:-1], xy[1:]
+    ab = b - a
+    seg_len = np.maximum(np.linalg.norm(ab, axis=1), 1e-12)
+    den = d[0] * ab[:, 1] - d[1] * ab[:, 0]
+    w = a - e
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = (w[:, 0] * ab[:, 1] - w[:, 1] * ab[:, 0]) / den
+        t = (w[:, 0] * d[1] - w[:, 1] * d[0]) / den
+    tlo = np.zeros(len(ab))
+    thi = np.ones(len(ab))
+    tlo[0] = -ext / seg_len[0]
+    thi[-1] = 1.0 + ext / seg_len[-1]
+    ok = np.isfinite(s) & (np.abs(den) > 1e-9) & (t >= tlo) & (t <= thi)
+    if not ok.any():
+        return math.nan, math.nan, -1
+    k = int(np.argmin(np.where(ok, np.abs(s), np.inf)))
+    return float(s[k]), float(t[k]), k
+
+
+def _set_end(s: _Skel, end: int, point: np.ndarray, p: PipeParams) -> None:
+    """Move the first (end=0) or last (end=-1) vertex to ``point``; a curve grows a vertex."""
+    xy = s.xy
+    if s.kind == "curved":
+        tip = xy[end]
+        direction = _end_direction(xy, p, end=end == -1)
+        if (point - tip) @ direction > 0:  # extension: add the point
+            s.xy = np.vstack([xy, point]) if end == -1 else np.vstack([point, xy])
+            return
+    xy = xy.copy()
+    xy[end] = point
+    s.xy = xy
+
+
+def _extend_and_join(skels: list[_Skel], length: float, p: PipeParams) -> None:
+    """§4.3: extend ends close to a pole to its axis, and close ends to their intersection.
+
+    An end within ``pole_extension`` (in x) of a pole axis, heading toward it, goes to the axis.
+    Any other end is moved along its direction to the nearest crossing with another skeleton (or
+    with the extension of that skeleton's end, which is then extended too) within
+    ``join_distance`` ahead, or within half of it behind (a trim: the points of a vertical pipe
+    reach beyond the axis of the rail it stands on).
+    """
+    for i, s in enumerate(skels):
+        for end in (0, -1):
+            tip = s.xy[end]
+            d = _end_direction(s.xy, p, end=end == -1)
+            pole_x = 0.0 if d[0] < 0 else length
+            if (
+                s.kind != "vertical"
+                and abs(tip[0] - pole_x) <= p.pole_extension
+                and abs(d[0]) > 0.1
+            ):
+                # §4.3: close to a pole: extended to the pole.
+                _set_end(s, end, tip + (pole_x - tip[0]) / d[0] * d, p)
+                continue
+            best_s, best_j, best_t, best_k = math.inf, -1, 0.0, 0
+            for j, o in enumerate(skels):
+                if j == i:
+                    continue
+                sr, t, k = _ray_polyline(tip, d, o.xy, p.join_distance)
+                if not -0.5 * p.join_distance <= sr <= p.join_distance:  # nan fails too
+                    continue
+                if abs(sr) < abs(best_s):
+                    best_s, best_j, best_t, best_k = sr, j, t, k
+            if best_j < 0:
+                continue
+            # §4.3: close ends are extended to their intersection.
+            point = tip + best_s * d
+            _set_end(s, end, point, p)
+            o = skels[best_j]
+            if best_k == 0 and best_t < 0:
+                _set_end(o, 0, point, p)
+            elif best_k == len(o.xy) - 2 and best_t > 1:
+                _set_end(o, -1, point, p)
+
+
+# ----------------------------------------------------------------------------------------------
+# Radius and depth
+# ----------------------------------------------------------------------------------------------
+
+
+def _dense(xy: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices every ``step`` along a polyline and their left unit normals."""
+    v = _resample(xy, step)
+    if len(v) < 2:
+        return v, np.tile([0.0, 1.0], (len(v), 1))
+    tang = np.gradient(v, axis=0)
+    tang /= np.maximum(np.linalg.norm(tang, axis=1, keepdims=True), 1e-12)
+    return v, np.column_stack([-tang[:, 1], tang[:, 0]])
+
+
+def _offsets(q: np.ndarray, xy: np.ndarray, p: PipeParams) -> tuple[np.ndarray, np.ndarray]:
+    """Distance (M,) of points q (M, 2) to a skeleton and their signed offset across it (left +).
+
+    Points whose nearest skeleton place is an end vertex beyond which they lie get an infinite
+    distance (they are not beside the pipe).
+    """
+    v, nrm = _dense(xy, p.measure_step)
+    dist, k = cKDTree(v).query(q, k=1)
+    off = np.einsum("ij,ij->i", q - v[k], nrm[k])
+    along = np.abs(np.einsum("ij,ij->i", q - v[k], nrm[k][:, ::-1] * [1.0, -1.0]))
+    dist = np.where(along > p.measure_step, np.inf, dist)
+    return dist, off
+
+
+def _measure_all(pts: np.ndarray, skels: list[_Skel], p: PipeParams) -> None:
+    """Radius, axis correction and depth of every pipe from the offsets of its points.
+
+    A pipe's points are those within ``r + assign_margin`` of its skeleton and not within
+    ``r + assign_margin`` of another pipe's (junctions and crossings count for neither). The
+    central ``radius_share`` of their signed offsets gives the radius (half-width / share) and
+    the axis (the midpoint: the skeleton is moved across by it); each point then gives the axis
+    depth ``z - sqrt(r**2 - o**2)``, and the median of these is taken (see the module notes).
+    """
+    if not skels:
+        return
+    xy = pts[:, :2]
+    # First guess: the points the chain was built from.
+    radius = np.zeros(len(skels))
+    for i, s in enumerate(skels):
+        _, off = _offsets(xy[s.idx], s.xy, p) if len(s.idx) else (None, np.zeros(0))
+        off = off[np.isfinite(off)] if off is not None else off
+        radius[i] = _half_width(off, p) if len(off) >= 3 else p.assign_margin
+    for _ in range(2):
+        dist = np.full((len(skels), len(pts)), np.inf)
+        offs = np.zeros((len(skels), len(pts)))
+        for i, s in enumerate(skels):
+            lo = s.xy.min(axis=0) - radius[i] - p.assign_margin - p.measure_step
+            hi = s.xy.max(axis=0) + radius[i] + p.assign_margin + p.measure_step
+            cand = np.flatnonzero(np.all((xy >= lo) & (xy <= hi), axis=1))
+            if len(cand):
+                dist[i, cand], offs[i, cand] = _offsets(xy[cand], s.xy, p)
+        inside = dist <= (radius + p.assign_margin)[:, None]
+        exclusive = inside & (inside.sum(axis=0) == 1)[None, :]
+        for i, s in enumerate(skels):
+            o = offs[i, exclusive[i]]
+            if len(o) < 3:
+                continue
+            lo_q, hi_q = _central_quantiles(o, p.radius_share)
+            radius[i] = 0.5 * (hi_q - lo_q) / p.radius_share
+            _shift_polyline(s, 0.5 * (lo_q + hi_q))
+    for i, s in enumerate(skels):
+        sel = exclusive[i]
+        s.n_points = int(sel.sum())
+        s.radius = float(radius[i])
+        if s.n_points == 0:
+            continue
+        _, o = _offsets(xy[sel], s.xy, p)
+        depth = pts[sel, 2] - np.sqrt(np.clip(s.radius**2 - o**2, 0.0, None))
+        s.z = float(np.median(depth))
+
+
+def _half_width(off: np.ndarray, p: PipeParams) -> float:
+    lo, hi = _central_quantiles(off, p.radius_share)
+    return 0.5 * (hi - lo) / p.radius_share
+
+
+def _shift_polyline(s: _Skel, shift: float) -> None:
+    """Move the polyline by ``shift`` along its left normal (vertex normals)."""
+    xy = s.xy
+    if len(xy) < 2 or shift == 0.0:
+        return
+    tang = np.gradient(xy, axis=0)
+    tang /= np.maximum(np.linalg.norm(tang, axis=1, keepdims=True), 1e-12)
+    normal = np.column_stack([-tang[:, 1], tang[:, 0]])
+    s.xy = xy + shift * normal

@@ -1,0 +1,220 @@
+"""Subdivision of a guardrail run into unit shapes (§4.1): one unit between consecutive poles.
+
+The poles are ordered along the run so that the road lies on the +z side of every unit frame
+(:mod:`guardrail_core.reconstruct.unit_frame`: z = x × up). Each unit has its own chord frame,
+so a curved run is followed unit by unit.
+
+Missing poles: where the gap between two consecutive detected poles is about k times the run's
+pole spacing (k >= 2, the median gap), k - 1 virtual poles are inserted evenly on the chord,
+so every unit has the design length and superimposes with the others (§4.2); the split
+reports them (``virtual``) and says so in ``notes``. The spacing is only known with at least
+two gaps; a run of two poles is one unit.
+
+References
+----------
+Matsumoto, Mori, Masuda (2019), "Extraction and shape reconstruction of guardrails using mobile
+mapping data", ISPRS Archives, §4.1, Fig. 10(d).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from guardrail_core.errors import ReconstructionError
+from guardrail_core.reconstruct.model import Pole
+from guardrail_core.reconstruct.runs import check_points
+from guardrail_core.reconstruct.unit_frame import UP, UnitFrame
+
+
+@dataclass(frozen=True)
+class UnitParams:
+    """How a run is split into units."""
+
+    end_margin_m: float = 0.3
+    """Metres. Points up to this far beyond the first or last pole (along the end unit's x)
+    still belong to the end unit; farther ones to none."""
+    max_offset_m: float = 1.0
+    """Metres. Points farther than this from a unit's pole plane (|z|) belong to no unit."""
+    missing_pole_ratio: float = 1.6
+    """A gap longer than this many times the median gap between poles has missing poles:
+    round(gap / median) - 1 virtual poles are inserted in it."""
+
+
+@dataclass(frozen=True)
+class UnitSplit:
+    """A run split into units.
+
+    Attributes
+    ----------
+    frames : (U,) unit frames, in order along the run
+    unit_of_point : (N,) int32, unit of each run point, -1 outside every unit
+    poles : (U + 1,) the poles the frames stand on, detected and virtual, in order
+    virtual : (U + 1,) bool, poles inserted where one was missing
+    notes : what was done about missing poles, in words
+    """
+
+    frames: list[UnitFrame]
+    unit_of_point: np.ndarray
+    poles: list[Pole] = field(default_factory=list)
+    virtual: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    notes: tuple[str, ...] = ()
+
+
+def order_poles(poles: list[Pole], toward_road: np.ndarray) -> list[Pole]:
+    """Poles in order along the run with the road on the +z side of every unit frame.
+
+    Parameters
+    ----------
+    poles : the poles of one run (any order)
+    toward_road : (3,) float64: horizontal direction from the run to the road or trajectory
+
+    Returns
+    -------
+    The poles sorted along the run's principal direction, reversed if needed so that the unit
+    normals (x × up) point toward the road (by the sum over units of normal · toward_road).
+
+    References
+    ----------
+    Matsumoto et al. 2019, §4.2, Fig. 13 (the z axis of a unit is the plane normal).
+    """
+    toward = np.asarray(toward_road, np.float64).reshape(-1)
+    if toward.shape != (3,) or not np.isfinite(toward).all():
+        raise ReconstructionError(f"toward_road must be a finite (3,) vector, got {toward_road!r}")
+    horizontal = toward * np.array([1.0, 1.0, 0.0])
+    if np.linalg.norm(horizontal) == 0:
+        raise ReconstructionError("toward_road must have a horizontal component")
+    if len(poles) < 2:
+        return list(poles)
+    xy = np.array([p.position[:2] for p in poles], np.float64)
+    centred = xy - xy.mean(axis=0)
+    _, _, vt = np.linalg.svd(centred, full_matrices=False)
+    ordered = [poles[i] for i in np.argsort(centred @ vt[0], kind="stable")]
+    pos = np.array([p.position for p in ordered])
+    along = np.diff(pos, axis=0) * np.array([1.0, 1.0, 0.0])
+    normals = np.cross(along, UP)
+    if float((normals @ horizontal).sum()) < 0:
+        ordered.reverse()
+    return ordered
+
+
+def _fill_missing(
+    poles: list[Pole], params: UnitParams
+) -> tuple[list[Pole], np.ndarray, list[str]]:
+    """Insert virtual poles in gaps of about k x the median spacing (k >= 2)."""
+    if len(poles) < 3:
+        return list(poles), np.zeros(len(poles), bool), []
+    pos = np.array([p.position for p in poles])
+    gap = np.linalg.norm(np.diff(pos[:, :2], axis=0), axis=1)
+    spacing = float(np.median(gap))
+    out: list[Pole] = [poles[0]]
+    virtual = [False]
+    notes = []
+    for i, g in enumerate(gap):
+        k = int(round(g / spacing)) if g > params.missing_pole_ratio * spacing else 1
+        for j in range(1, k):
+            t = j / k
+            out.append(
+                Pole(
+                    position=(1 - t) * pos[i] + t * pos[i + 1],
+                    radius=float(np.median([p.radius for p in poles])),
+                    height=float(np.median([p.height for p in poles])),
+                    n_points=0,
+                )
+            )
+            virtual.append(True)
+        if k > 1:
+            notes.append(
+                f"gap of {g:.2f} m between poles {i} and {i + 1} (spacing {spacing:.2f} m): "
+                f"{k - 1} missing pole(s) inserted"
+            )
+        out.append(poles[i + 1])
+        virtual.append(False)
+    return out, np.array(virtual), notes
+
+
+def split_units(xyz: np.ndarray, poles: list[Pole], params: UnitParams = UnitParams()) -> UnitSplit:
+    """Units of one run: a frame between each pair of consecutive poles, and each point's unit.
+
+    Parameters
+    ----------
+    xyz : (N, 3) float64, metres, world: the points of the run
+    poles : the run's poles in order (see :func:`order_poles`)
+    params : margins and the missing-pole rule
+
+    Returns
+    -------
+    UnitSplit: a point belongs to the unit whose [0, length] x-range holds it; where two
+    units' ranges hold it (the outside of a bend) the one it lies nearest the pole plane of,
+    where none does (the inside of a bend, or past the end poles) the nearest within
+    ``end_margin_m``; points farther than ``max_offset_m`` from the pole plane get -1.
+
+    References
+    ----------
+    Matsumoto et al. 2019, §4.1, Fig. 10(d) (each unit shape includes two poles).
+    """
+    xyz = check_points(xyz)
+    n = len(xyz)
+    if len(poles) < 2:
+        note = f"{len(poles)} pole(s): no unit"
+        return UnitSplit(
+            [], np.full(n, -1, np.int32), list(poles), np.zeros(len(poles), bool), (note,)
+        )
+    all_poles, virtual, notes = _fill_missing(list(poles), params)
+    pos = np.array([p.position for p in all_poles], np.float64)
+    frames = [UnitFrame.between(pos[i], pos[i + 1]) for i in range(len(pos) - 1)]
+    n_units = len(frames)
+    unit = np.full(n, -1, np.int32)
+    if n == 0:
+        return UnitSplit(frames, unit, all_poles, virtual, tuple(notes))
+    # Candidates: the two units meeting at the nearest pole.
+    _, nearest = cKDTree(pos[:, :2]).query(xyz[:, :2])
+    cand = np.stack([np.clip(nearest - 1, 0, n_units - 1), np.clip(nearest, 0, n_units - 1)], 1)
+    origin = np.array([f.origin for f in frames])
+    along = np.array([f.along for f in frames])
+    normal = np.array([f.normal for f in frames])
+    length = np.array([f.length for f in frames])
+    outside = np.empty((n, 2))
+    offset = np.empty((n, 2))
+    for c in range(2):  # the two candidates, vectorised over points
+        d = xyz - origin[cand[:, c]]
+        x = np.einsum("ij,ij->i", d, along[cand[:, c]])
+        outside[:, c] = np.maximum(0.0, np.maximum(-x, x - length[cand[:, c]]))
+        offset[:, c] = np.abs(np.einsum("ij,ij->i", d, normal[cand[:, c]]))
+    # Inside a range first, then nearer the pole plane.
+    key = outside * 1e3 + offset
+    pick = np.argmin(key, axis=1)
+    rows = np.arange(n)
+    ok = (outside[rows, pick] <= params.end_margin_m) & (offset[rows, pick] <= params.max_offset_m)
+    unit[ok] = cand[rows[ok], pick[ok]]
+    return UnitSplit(frames, unit, all_poles, virtual, tuple(notes))
+
+
+def unit_points(xyz: np.ndarray, split: UnitSplit) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Each unit's points in its own unit coordinates, and their indices into ``xyz``.
+
+    Parameters
+    ----------
+    xyz : (N, 3) float64, metres, world: the run points given to :func:`split_units`
+    split : the split
+
+    Returns
+    -------
+    points : (U,) list of (Ni, 3) float64 unit coordinates (x along, y up, z toward the road)
+    index : (U,) list of (Ni,) int64 indices into ``xyz``
+
+    References
+    ----------
+    Matsumoto et al. 2019, §4.2, Fig. 13.
+    """
+    xyz = check_points(xyz)
+    if len(split.unit_of_point) != len(xyz):
+        raise ReconstructionError(
+            f"the split has {len(split.unit_of_point)} points, xyz has {len(xyz)}"
+        )
+    order = np.argsort(split.unit_of_point, kind="stable")
+    bounds = np.searchsorted(split.unit_of_point[order], np.arange(len(split.frames) + 1))
+    index = [order[bounds[u] : bounds[u + 1]] for u in range(len(split.frames))]
+    return [f.to_unit(xyz[i]) for f, i in zip(split.frames, index, strict=True)], index

@@ -1,0 +1,131 @@
+"""Beam detection and section curves (Matsumoto et al. 2019, §4.4)."""
+
+import numpy as np
+import pytest
+
+from guardrail_core.errors import ReconstructionError
+from guardrail_core.reconstruct.beams import BeamParams, reconstruct_beam, unit_type
+from guardrail_core.synth.designs import w_beam_section
+
+LENGTH = 4.0
+POST_R = 0.0699
+
+
+def _section_truth():
+    s = w_beam_section()
+    return np.column_stack([0.1 + s[:, 0], 0.6 + s[:, 1]])  # (z, y)
+
+
+def _beam_points(rng, n=6000, noise=0.002):
+    truth = _section_truth()
+    seg = np.linalg.norm(np.diff(truth, axis=0), axis=1)
+    cum = np.concatenate([[0.0], np.cumsum(seg)])
+    u = rng.uniform(0, cum[-1], n)
+    z = np.interp(u, cum, truth[:, 0]) + 0.00115  # the front face of a 2.3 mm plate
+    y = np.interp(u, cum, truth[:, 1])
+    pts = np.column_stack([rng.uniform(0, LENGTH, n), y, z])
+    return pts + rng.normal(0, noise, pts.shape), truth
+
+
+def _posts(rng, n=500):
+    pts = []
+    for x in (0.0, LENGTH):
+        ang = rng.uniform(-np.pi / 2, np.pi / 2, n)
+        pts.append(
+            np.column_stack(
+                [x + POST_R * np.sin(ang), rng.uniform(0, 0.78, n), POST_R * np.cos(ang)]
+            )
+        )
+    return np.vstack(pts)
+
+
+def _hausdorff(a, b):
+    def dense(p):
+        t = np.linspace(0, 1, 20)[:, None]
+        return np.vstack([p[i] + t * (p[i + 1] - p[i]) for i in range(len(p) - 1)])
+
+    a, b = dense(a), dense(b)
+    d = np.linalg.norm(a[:, None] - b[None], axis=-1)
+    return max(d.min(0).max(), d.min(1).max())
+
+
+def test_w_beam_section_within_tolerance():
+    rng = np.random.default_rng(0)
+    pts, truth = _beam_points(rng)
+    rec = reconstruct_beam(np.vstack([pts, _posts(rng)]), LENGTH, POST_R)
+    assert rec.section.shape[1] == 2 and len(rec.section) > 20
+    assert np.all(np.diff(rec.section[:, 1]) > 0)  # bottom to top
+    assert _hausdorff(rec.section, truth) < 0.006
+    assert rec.n_points > 0.9 * len(pts)
+
+
+def test_shadowed_lower_flank_is_filled_by_mirroring():
+    rng = np.random.default_rng(1)
+    pts, truth = _beam_points(rng, n=8000)
+    # the lower flank of the upper ridge (z rising with y) cannot be seen from above
+    ridge = (pts[:, 1] > 0.6 + 0.02) & (pts[:, 1] < 0.6 + 0.08)
+    rec = reconstruct_beam(pts[~ridge], LENGTH, POST_R)
+    assert rec.notes
+    assert _hausdorff(rec.section, truth) < 0.012
+    straight = reconstruct_beam(pts[~ridge], LENGTH, POST_R, BeamParams(fill_shadowed=False))
+    assert _hausdorff(rec.section, truth) < _hausdorff(straight.section, truth)
+
+
+def test_unit_type_tells_beams_from_pipes():
+    rng = np.random.default_rng(2)
+    pts, _ = _beam_points(rng)
+    assert unit_type(pts, LENGTH) == "beam"
+
+    # a pipe fence: two rails and balusters every 125 mm, densely sampled
+    def block(x0, x1, y0, y1, n):
+        return np.column_stack(
+            [rng.uniform(x0, x1, n), rng.uniform(y0, y1, n), rng.uniform(0, 0.02, n)]
+        )
+
+    rails = [block(0.0, 2.0, y - 0.024, y + 0.024, 4000) for y in (0.15, 0.86)]
+    bal = [block(x - 0.011, x + 0.011, 0.15, 0.86, 800) for x in np.arange(0.125, 2.0, 0.125)]
+    assert unit_type(np.vstack(rails + bal), 2.0) == "pipe"
+    assert unit_type(np.vstack(rails), 2.0) == "pipe"
+
+
+def test_no_points_give_a_note():
+    rec = reconstruct_beam(np.zeros((0, 3)), LENGTH, POST_R)
+    assert rec.section.shape == (0, 2) and rec.notes
+    assert unit_type(np.zeros((0, 3)), LENGTH) == "pipe"
+
+
+def test_only_post_points_give_a_note():
+    rng = np.random.default_rng(3)
+    rec = reconstruct_beam(_posts(rng), LENGTH, POST_R)
+    assert rec.section.shape == (0, 2) and rec.notes
+
+
+@pytest.mark.parametrize("points", [np.array([[1.0, np.inf, 0.1]]), np.zeros((3, 4)), np.zeros(3)])
+def test_bad_points_raise(points):
+    with pytest.raises(ReconstructionError):
+        reconstruct_beam(points, LENGTH, POST_R)
+    with pytest.raises(ReconstructionError):
+        unit_type(points, LENGTH)
+
+
+@pytest.mark.parametrize(
+    ("length", "pole_radius"), [(0.0, 0.07), (4.0, -0.07), (float("nan"), 0.07)]
+)
+def test_bad_unit_raises(length, pole_radius):
+    with pytest.raises(ReconstructionError):
+        reconstruct_beam(np.zeros((0, 3)), length, pole_radius)
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"slice_interval": -0.01},
+        {"cell": 0.0},
+        {"filled_share": 1.5},
+        {"taubin_mu": 0.2},
+        {"min_points": 0},
+    ],
+)
+def test_params_out_of_range_raise(kwargs):
+    with pytest.raises(ReconstructionError):
+        BeamParams(**kwargs)

@@ -1,0 +1,159 @@
+"""Pipe skeletons and radii from superimposed unit points (Matsumoto et al. 2019, §4.3)."""
+
+import numpy as np
+import pytest
+
+from guardrail_core.errors import ReconstructionError
+from guardrail_core.reconstruct.pipes import PipeParams, reconstruct_pipes
+
+LENGTH = 2.0
+POLE_R = 0.0305
+
+
+def _pipe_points(rng, a, b, r, n, noise=0.0015):
+    """Points on the +z half of a cylinder of axis a -> b (in the x-y plane, z = 0)."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    d = (b - a) / np.linalg.norm(b - a)
+    nrm = np.array([-d[1], d[0]])
+    t = rng.uniform(0, 1, n)
+    u = rng.uniform(-r, r, n)
+    xy = a + np.outer(t, b - a) + np.outer(u, nrm)
+    z = np.sqrt(r * r - u * u)
+    return np.column_stack([xy, z]) + rng.normal(0, noise, (n, 3))
+
+
+def _pole_points(rng, x, n=400, height=0.9):
+    ang = rng.uniform(-np.pi / 2, np.pi / 2, n)
+    return np.column_stack(
+        [x + POLE_R * np.sin(ang), rng.uniform(0, height, n), POLE_R * np.cos(ang)]
+    )
+
+
+def _axis_error(truth_xy, pipe):
+    """Largest distance (x, y) of the middle 80 % of a true axis to a reconstructed axis."""
+    t = np.linspace(0.1, 0.9, 60)
+    q = truth_xy[0] + np.outer(t, truth_xy[1] - truth_xy[0])
+    a, b = pipe.axis[:-1, :2], pipe.axis[1:, :2]
+    ab = b - a
+    s = np.clip(((q[:, None] - a[None]) * ab[None]).sum(-1) / (ab**2).sum(-1)[None], 0, 1)
+    return np.sqrt(((q[:, None] - (a[None] + s[..., None] * ab[None])) ** 2).sum(-1)).min(1).max()
+
+
+@pytest.fixture(scope="module")
+def fence():
+    rng = np.random.default_rng(7)
+    truth = [
+        ("horizontal", [[0.0, 0.8], [LENGTH, 0.8]], 0.0243, 2500),
+        ("horizontal", [[0.0, 0.3], [LENGTH, 0.3]], 0.017, 2500),
+        ("vertical", [[0.7, 0.3], [0.7, 0.8]], 0.011, 600),
+        ("vertical", [[1.3, 0.3], [1.3, 0.8]], 0.011, 600),
+        ("diagonal", [[0.0, 0.3], [LENGTH, 0.8]], 0.0136, 2500),
+    ]
+    pts = [_pipe_points(rng, *axis, r, n) for _, axis, r, n in truth]
+    pts += [_pole_points(rng, 0.0), _pole_points(rng, LENGTH)]
+    return np.vstack(pts), truth
+
+
+def test_every_pipe_found_with_its_radius_axis_and_kind(fence):
+    pts, truth = fence
+    rec = reconstruct_pipes(pts, LENGTH, POLE_R)
+    assert len(rec.pipes) == len(truth)
+    for kind, axis, r, _ in truth:
+        axis = np.asarray(axis)
+        errs = [_axis_error(axis, p) for p in rec.pipes]
+        best = rec.pipes[int(np.argmin(errs))]
+        assert min(errs) < 0.005, (kind, min(errs))
+        assert abs(best.radius - r) < 0.0015, (kind, best.radius, r)
+        assert best.kind == kind
+        assert abs(np.median(best.axis[:, 2])) < 0.005  # axis depth: the plane of the poles
+        assert best.axis.shape[1] == 3 and best.n_points > 0
+
+
+def test_rails_reach_the_poles_and_verticals_the_rails(fence):
+    pts, _ = fence
+    rec = reconstruct_pipes(pts, LENGTH, POLE_R)
+    for p in rec.pipes:
+        if p.kind == "horizontal":
+            assert p.axis[0, 0] == pytest.approx(0.0, abs=1e-6)
+            assert p.axis[-1, 0] == pytest.approx(LENGTH, abs=1e-6)
+        if p.kind == "vertical":
+            assert sorted(p.axis[[0, -1], 1]) == pytest.approx([0.3, 0.8], abs=0.006)
+
+
+def test_histogram_has_peaks_above_threshold_at_the_verticals(fence):
+    pts, _ = fence
+    h = reconstruct_pipes(pts, LENGTH, POLE_R).histogram
+    assert len(h.edges) == len(h.counts) + 1
+    centres = 0.5 * (h.edges[:-1] + h.edges[1:])
+    peaks = centres[h.counts > h.threshold]
+    assert np.all((np.abs(peaks - 0.7) < 0.02) | (np.abs(peaks - 1.3) < 0.02))
+    assert np.any(np.abs(peaks - 0.7) < 0.02) and np.any(np.abs(peaks - 1.3) < 0.02)
+
+
+def test_curved_pipe_is_curved():
+    rng = np.random.default_rng(3)
+    x = rng.uniform(0, LENGTH, 6000)
+    u = rng.uniform(-0.0136, 0.0136, len(x))
+    y = 0.5 + 0.2 * np.sin(np.pi * x)
+    slope = 0.2 * np.pi * np.cos(np.pi * x)
+    nrm = np.column_stack([-slope, np.ones_like(x)]) / np.sqrt(1 + slope**2)[:, None]
+    pts = np.column_stack([np.column_stack([x, y]) + u[:, None] * nrm, np.sqrt(0.0136**2 - u**2)])
+    pts += rng.normal(0, 0.0015, pts.shape)
+    rec = reconstruct_pipes(pts, LENGTH, POLE_R)
+    assert [p.kind for p in rec.pipes] == ["curved"]
+    axis = rec.pipes[0].axis
+    inner = (axis[:, 0] > 0.1) & (axis[:, 0] < 1.9)
+    assert np.abs(axis[inner, 1] - (0.5 + 0.2 * np.sin(np.pi * axis[inner, 0]))).max() < 0.005
+    assert abs(rec.pipes[0].radius - 0.0136) < 0.0015
+
+
+def test_no_points_gives_a_note_not_a_crash():
+    rec = reconstruct_pipes(np.zeros((0, 3)), LENGTH, POLE_R)
+    assert rec.pipes == () and rec.notes
+
+
+def test_only_pole_points_give_a_note():
+    rng = np.random.default_rng(0)
+    rec = reconstruct_pipes(_pole_points(rng, 0.0), LENGTH, POLE_R)
+    assert rec.pipes == () and any("no" in n for n in rec.notes)
+
+
+def test_a_pipe_without_points_is_missing_with_a_note():
+    rng = np.random.default_rng(5)
+    pts = _pipe_points(rng, [0.0, 0.8], [LENGTH, 0.8], 0.0243, 2000)
+    rec = reconstruct_pipes(np.vstack([pts, pts[:3] + [0.5, -0.4, 0.0]]), LENGTH, POLE_R)
+    assert len(rec.pipes) == 1 and rec.notes
+
+
+@pytest.mark.parametrize(
+    "points",
+    [np.array([[0.5, 0.5, np.nan]]), np.zeros((4, 2)), np.zeros(3), [["a", "b", "c"]]],
+)
+def test_bad_points_raise(points):
+    with pytest.raises(ReconstructionError):
+        reconstruct_pipes(points, LENGTH, POLE_R)
+
+
+@pytest.mark.parametrize(
+    ("length", "pole_radius"), [(0.0, 0.03), (-1.0, 0.03), (2.0, -0.1), (0.05, 0.03)]
+)
+def test_bad_unit_raises(length, pole_radius):
+    with pytest.raises(ReconstructionError):
+        reconstruct_pipes(np.zeros((0, 3)), length, pole_radius)
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"slice_interval": -0.03},
+        {"histogram_bin": 0.0},
+        {"radius_share": 1.5},
+        {"horizontal_angle": 95.0},
+        {"taubin_mu": 0.1},
+        {"join_distance": float("nan")},
+        {"min_points": 0},
+    ],
+)
+def test_params_out_of_range_raise(kwargs):
+    with pytest.raises(ReconstructionError):
+        PipeParams(**kwargs)

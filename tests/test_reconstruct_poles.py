@@ -1,0 +1,118 @@
+"""Pole detection (§4.1) on seeded synthetic runs: counts, axis error, bad inputs."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from guardrail_core.errors import ReconstructionError
+from guardrail_core.reconstruct.poles import PoleParams, detect_poles, fit_circles
+from tests.reconstruct_fixtures import make_run
+
+#: Horizontal error bound of a pole's ground point, metres (80 points, 5 mm range noise; the target is 20 mm).
+POSITION_TOL = 0.01
+
+
+def _match(det, truth):
+    got = np.array([p.position for p in det.poles])
+    assert len(got) == len(truth)
+    return np.linalg.norm(got[:, :2] - truth[:, :2], axis=1), np.abs(got[:, 2] - truth[:, 2])
+
+
+def test_fit_circles_recovers_half_arcs_in_batch():
+    rng = np.random.default_rng(3)
+    centres = np.array([[1.0, 2.0], [-3.0, 0.5]])
+    radii = np.array([0.0305, 0.07])
+    t = rng.uniform(-np.pi / 2, np.pi / 2, (2, 400))
+    xy = np.concatenate(
+        [c + (r + rng.normal(0, 0.002, 400))[:, None] * np.stack([np.cos(a), np.sin(a)], 1)
+         for c, r, a in zip(centres, radii, t, strict=True)]
+    )  # fmt: skip
+    label = np.repeat([0, 1], 400)
+    c, r, rms, inlier = fit_circles(xy, label, 2)
+    np.testing.assert_allclose(c, centres, atol=1e-3)
+    np.testing.assert_allclose(r, radii, atol=1e-3)
+    assert (rms < 0.003).all() and inlier.mean() > 0.95
+
+
+def test_straight_run_finds_every_pole_on_its_axis():
+    run = make_run(4, seed=1)
+    det = detect_poles(run.xyz, run.ground)
+    xy_err, z_err = _match(det, run.poles)
+    assert xy_err.max() < POSITION_TOL
+    assert z_err.max() < 0.01
+    assert all(abs(p.radius - run.pole_radius) < 0.003 for p in det.poles)
+    # Height: ground to the highest pole point (the synthetic top is at pole_height).
+    assert all(abs(p.height - run.pole_height) < 0.02 for p in det.poles)
+    # In order along the run (either direction).
+    along = np.array([p.position[0] for p in det.poles])
+    assert (np.diff(along) > 0).all() or (np.diff(along) < 0).all()
+    # Pole points: most true pole points are claimed, few others.
+    claimed = det.point_is_pole
+    assert claimed[run.is_pole].mean() > 0.9
+    assert run.is_pole[claimed].mean() > 0.8
+
+
+def test_balusters_that_stop_at_the_lowest_rail_are_not_poles():
+    run = make_run(3, rails=(0.15, 0.86), balusters=True, seed=2)
+    det = detect_poles(run.xyz, run.ground)
+    xy_err, _ = _match(det, run.poles)
+    assert xy_err.max() < POSITION_TOL
+
+
+def test_without_ground_points_the_lowest_points_stand_in():
+    run = make_run(3, rails=(0.15, 0.86), balusters=True, seed=4)
+    det = detect_poles(run.xyz, np.zeros((0, 3)))
+    xy_err, z_err = _match(det, run.poles)
+    assert xy_err.max() < POSITION_TOL and z_err.max() < 0.02
+
+
+def test_curved_run_and_thick_beam_posts():
+    run = make_run(5, arc_radius=25.0, pole_radius=0.0699, pole_height=0.78, seed=5)
+    det = detect_poles(run.xyz, run.ground)
+    xy_err, _ = _match(det, run.poles)
+    assert xy_err.max() < POSITION_TOL
+    assert all(abs(p.radius - 0.0699) < 0.004 for p in det.poles)
+
+
+def test_a_pole_without_points_is_missing_not_invented():
+    run = make_run(4, missing=(2,), seed=6)
+    det = detect_poles(run.xyz, run.ground)
+    xy_err, _ = _match(det, run.poles)  # 4 of the 5 poles
+    assert xy_err.max() < POSITION_TOL
+
+
+def test_rails_alone_have_no_pole():
+    run = make_run(3, seed=7)
+    det = detect_poles(run.xyz[~run.is_pole], run.ground)
+    assert det.poles == [] and not det.point_is_pole.any()
+
+
+def test_deterministic():
+    run = make_run(2, seed=8)
+    a, b = detect_poles(run.xyz, run.ground), detect_poles(run.xyz, run.ground)
+    np.testing.assert_array_equal([p.position for p in a.poles], [p.position for p in b.poles])
+
+
+def test_tiny_input_gives_no_pole():
+    det = detect_poles(np.zeros((3, 3)))
+    assert det.poles == [] and det.point_is_pole.shape == (3,)
+
+
+@pytest.mark.parametrize(
+    ("xyz", "ground", "match"),
+    [
+        (np.zeros((10, 2)), None, r"shape \(N, 3\)"),
+        (np.array([[0.0, 0.0, np.nan]] * 10), None, "NaN"),
+        (np.zeros((10, 3)), np.zeros((5, 4)), r"ground must have shape"),
+        ("not points", None, "array of numbers|shape"),
+    ],
+)
+def test_bad_input_raises(xyz, ground, match):
+    with pytest.raises(ReconstructionError, match=match):
+        detect_poles(xyz, ground)
+
+
+def test_bad_params_raise():
+    with pytest.raises(ReconstructionError, match="section_step_m"):
+        detect_poles(np.zeros((10, 3)), None, PoleParams(section_step_m=0.0))
