@@ -89,6 +89,11 @@ class ReconstructionParams:
                 raise InvalidOptionError(
                     f"unknown parameter {stage}.{unknown[0]} (known: {', '.join(sorted(names))})"
                 )
+            defaults = dataclasses.asdict(stage_cls())
+            values = {  # JSON has lists where the parameters have tuples (colours)
+                k: tuple(v) if isinstance(defaults[k], tuple) and isinstance(v, list) else v
+                for k, v in values.items()
+            }
             try:
                 parts[stage] = stage_cls(**values)
             except (TypeError, ValueError, ReconstructionError) as exc:

@@ -140,8 +140,8 @@ def inventory_rows(
     Returns
     -------
     list of dict
-        Keys (:data:`ROW_KEYS`): ``run_id``; ``status`` ("reconstructed": a unit model; "poles only": poles but no
-        model; "not reconstructed": neither); ``type`` ("pipe" | "beam" | "unknown");
+        Keys (:data:`ROW_KEYS`): ``run_id``; ``status`` ("reconstructed": a unit model with pipes or a beam section;
+        "poles only": poles but no such model; "not reconstructed": neither); ``type`` ("pipe" | "beam" | "unknown");
         ``signature`` (text, see :func:`pipe_signature` / :func:`beam_signature`) and
         ``design`` (structured: a list of pipes, or the beam's section summary; None);
         ``length_m`` (sum of distances between consecutive poles); ``height_m`` (the highest of
@@ -164,7 +164,7 @@ def inventory_rows(
             raise ReconstructionError(f"run {run.run_id}: pole positions must be finite")
         spacing = np.linalg.norm(np.diff(positions, axis=0), axis=1)
         model = run.model
-        if model is not None:
+        if model is not None and (model.pipes or model.section is not None):
             status = "reconstructed"
         elif len(run.poles):
             status = "poles only"

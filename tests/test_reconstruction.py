@@ -1,0 +1,160 @@
+"""Reconstruction end to end: what `guardrail process` writes, `guardrail reconstruct`, the
+evaluation against the truth, and the bad cases of whole runs."""
+
+from __future__ import annotations
+
+import csv
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from guardrail_core.cli import main
+from guardrail_core.drive import Drive
+from guardrail_core.errors import InvalidOptionError
+from guardrail_core.evaluate import evaluate_run
+from guardrail_core.reconstruct.inventory import inventory_rows
+from guardrail_core.reconstruction import (
+    RECONSTRUCTION_DIR,
+    ReconstructionParams,
+    load_reconstruction,
+    reconstruct_run,
+)
+from guardrail_core.run_folder import load_run
+from tests.reconstruct_fixtures import make_run
+
+
+def test_process_writes_models_inventory_and_meshes(run_path: Path) -> None:
+    folder = run_path / RECONSTRUCTION_DIR
+    runs, data = load_reconstruction(run_path)
+    assert ReconstructionParams.from_json(data["params"]) == ReconstructionParams()
+    # The test street has one beam run and one pipe run (pipe_diamond).
+    assert sorted(r.model.type for r in runs if r.model is not None) == ["beam", "pipe"]
+    geo = json.loads((folder / "inventory.geojson").read_text())
+    assert geo["type"] == "FeatureCollection" and len(geo["features"]) == len(runs)
+    with (folder / "inventory.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    assert [int(r["run_id"]) for r in rows] == [r.run_id for r in runs]
+    for run in runs:
+        for ext in ("glb", "ply", "obj"):
+            mesh = trimesh.load(folder / "meshes" / f"run_{run.run_id:03d}.{ext}", force="mesh")
+            assert len(mesh.faces) > 0
+    assert (folder / "meshes" / "guardrails.glb").is_file()
+    with np.load(folder / "superimposed.npz") as stored:
+        assert {f"run_{r.run_id:03d}_points" for r in runs} <= set(stored.files)
+
+
+def test_reconstruction_against_the_truth(drive: Drive, run_path: Path) -> None:
+    rec = evaluate_run(drive, load_run(run_path))["reconstruction"]
+    overall = rec["overall"]
+    # Every pole of both runs (13 + 8), to a few millimetres.
+    assert overall["poles_found"] == overall["poles_total"] == 21
+    assert overall["pole_pos_err_mm_median"] <= 5.0
+    assert overall["unit_length_err_mm_median"] <= 5.0
+    # The diamond's rails and its four diagonals (two of which lie along the scan lines).
+    assert rec["designs"]["pipe_diamond"]["pipes_found"] == 6
+    assert overall["radius_err_mm_median"] <= 5.0
+    assert overall["axis_dev_mm_mean"] <= 8.0
+    assert rec["designs"]["beam_w"]["beam_section_hausdorff_mm"] <= 10.0
+
+
+def test_reconstruct_command_reruns_with_other_parameters(
+    run_path: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    run = tmp_path / "run"
+    shutil.copytree(run_path, run)
+    before = (run / RECONSTRUCTION_DIR / "models.json").read_text()
+    code = main(["reconstruct", str(run), "--quiet", "--set", "beams.slice_interval=0.02"])
+    assert code == 0
+    out = capsys.readouterr().out
+    assert "reconstructed" in out and "wrote" in out
+    _, data = load_reconstruction(run)
+    assert data["params"]["beams"]["slice_interval"] == 0.02
+    assert (run / RECONSTRUCTION_DIR / "models.json").read_text() != before
+    assert not list(run.glob(".reconstruction*"))  # no staging folder left behind
+
+
+def test_a_bad_parameter_is_named_and_keeps_the_old_reconstruction(
+    run_path: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    run = tmp_path / "run"
+    shutil.copytree(run_path, run)
+    before = (run / RECONSTRUCTION_DIR / "models.json").read_text()
+    for setting in ("pipes.no_such_threshold=1", "beams.slice_interval=-1", "beams=1"):
+        assert main(["reconstruct", str(run), "--quiet", "--set", setting]) == 2
+        err = capsys.readouterr().err
+        assert "InvalidOptionError" in err
+    assert (run / RECONSTRUCTION_DIR / "models.json").read_text() == before
+
+
+def test_params_from_json_refuses_unknown_stages() -> None:
+    with pytest.raises(InvalidOptionError, match="unknown reconstruction stage"):
+        ReconstructionParams.from_json({"pipez": {}})
+    params = ReconstructionParams().with_settings(["poles.section_step_m=0.04"])
+    assert params.poles.section_step_m == 0.04
+    assert ReconstructionParams.from_json(params.to_json()) == params
+
+
+def test_evaluate_units_sweep_prints_a_table_and_writes_a_plot(
+    drive_path: Path, run_path: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    plot = tmp_path / "sweep.png"
+    args = ["evaluate", str(drive_path), "--run", str(run_path), "--quiet", "--json"]
+    assert main([*args, "--units-sweep", "1,4", "--plot", str(plot)]) == 0
+    result = json.loads(capsys.readouterr().out)
+    sweep = result["units_sweep"]
+    assert sweep["units"] == [1, 4]
+    assert sweep["designs"]["pipe_diamond"]["total"] == [6, 6]
+    assert sweep["designs"]["beam_w"]["found"] == [1, 1]  # a beam from one unit
+    assert plot.stat().st_size > 10_000 and plot.read_bytes()[:4] == b"\x89PNG"
+    assert main([*args, "--units-sweep", "0,2"]) == 2
+
+
+# ------------------------------------------------------------------------- bad cases of runs
+
+
+def _reconstruct(synth, **kwargs):
+    return reconstruct_run(synth.xyz, synth.ground, synth.toward_road, run_id=0, **kwargs)
+
+
+def test_a_run_of_one_unit_is_reconstructed_and_says_so() -> None:
+    synth = make_run(n_units=1, seed=3)
+    run, _ = _reconstruct(synth)
+    assert len(run.poles) == 2 and len(run.units) == 1
+    assert run.model is not None and run.model.type == "pipe"
+    assert any("one unit" in note for note in run.notes)
+    [row] = inventory_rows([run], np.zeros(3))
+    assert row["status"] == "reconstructed"
+
+
+def test_a_missing_pole_is_inserted_and_reported() -> None:
+    synth = make_run(n_units=6, missing=(3,), seed=4)
+    run, _ = _reconstruct(synth)
+    assert len(run.poles) == 7  # the missing one inserted between its neighbours
+    assert any("missing pole" in note for note in run.notes)
+    [row] = inventory_rows([run], np.zeros(3))
+    assert "missing pole" in row["notes"]
+
+
+def test_rails_without_poles_are_not_reconstructed_and_the_inventory_says_why() -> None:
+    synth = make_run(n_units=3, seed=5)
+    rails = make_run(n_units=3, seed=5, pole_points=0)
+    assert len(rails.xyz) < len(synth.xyz)
+    run, superimposed = _reconstruct(rails)
+    assert run.model is None and superimposed is None
+    [row] = inventory_rows([run], np.zeros(3))
+    assert row["status"] == "not reconstructed"
+    assert "pole" in row["notes"]
+
+
+def test_a_unit_without_points_between_its_poles_gives_poles_only() -> None:
+    synth = make_run(n_units=2, seed=6, rail_points_per_m=0)
+    run, _ = _reconstruct(synth)
+    assert len(run.poles) == 3
+    [row] = inventory_rows([run], np.zeros(3))
+    assert row["status"] == "poles only"
+    assert row["pole_count"] == 3
+    assert "no pipe reconstructed" in row["notes"]
