@@ -47,6 +47,7 @@ bench: setup
 	$(BIN)/python benchmarks/bench_simulate.py
 	@test -f $(DEMO_DRIVE)/drive.json || $(BIN)/guardrail demo --out $(DEMO_DRIVE) --quiet
 	$(BIN)/python benchmarks/bench_extract.py --drive $(DEMO_DRIVE)
+	$(BIN)/python benchmarks/bench_reconstruct.py --run $(dir $(DEMO_DRIVE))run
 
 clean:
 	rm -rf $(VENV) demo_output .pytest_cache .ruff_cache .mypy_cache

@@ -50,13 +50,11 @@ def slider_params(base: ReconstructionParams, step: int) -> ReconstructionParams
     """Thresholds an operator might try: every repeat moves the sliders a little."""
     pipes = base.pipes
     factor = 1.0 + 0.05 * ((step % 3) - 1)
-    changes = {}
-    for name in ("histogram_threshold", "diameter_share", "slice_interval_m"):
-        if hasattr(pipes, name):
-            value = getattr(pipes, name)
-            changes[name] = (
-                min(value * factor, 0.99) if name == "diameter_share" else value * factor
-            )
+    changes: dict[str, float | int] = {}
+    for name in ("histogram_factor", "radius_share", "slice_interval"):
+        value = getattr(pipes, name)
+        changes[name] = min(value * factor, 0.99) if name == "radius_share" else value * factor
+    changes["taubin_iterations"] = pipes.taubin_iterations + step % 3
     return dataclasses.replace(base, pipes=dataclasses.replace(pipes, **changes))
 
 

@@ -80,7 +80,7 @@ def truth_guardrails(objects: list[dict]) -> list[dict]:
     return [o for o in objects if o.get("kind") == "guardrail"]
 
 
-def _match_poles(
+def match_poles(
     runs: list[RunModel], truths: list[dict], match: ReconstructionMatch
 ) -> tuple[dict[tuple[int, int], tuple[int, int, float]], int]:
     """Detected pole (run index, pole index) -> (truth index, truth pole index, error m)."""
@@ -214,7 +214,7 @@ def evaluate_reconstruction(
     unit_length_err_mm_median`` (None where nothing was measured).
     """
     truths = truth_guardrails(objects)
-    matched, _ = _match_poles(runs, truths, match)
+    matched, _ = match_poles(runs, truths, match)
     per_truth: dict[int, dict[str, Any]] = {}
     for ti, t in enumerate(truths):
         per_truth[ti] = {

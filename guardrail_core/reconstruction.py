@@ -213,6 +213,7 @@ def reconstruct_run(
     notes.extend(split.notes)
     poles, frames = split.poles, split.frames  # with virtual poles where one was missing
     unit_points = [frames[u].to_unit(rails[split.unit_of_point == u]) for u in range(len(frames))]
+    unit_points = [p[p[:, 1] >= params.units.ground_clearance_m] for p in unit_points]
     used = unit_points if max_units is None else unit_points[:max_units]
     superimposed = superimpose(used, params.register)
     unregistered = int((~superimposed.registered).sum())

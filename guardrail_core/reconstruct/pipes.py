@@ -162,6 +162,12 @@ class PipeParams:
     min_length: float = 0.1
     assign_margin: float = 0.01
     measure_step: float = 0.005
+    line_band: float = 0.03
+    line_min_length: float = 0.3
+    line_chunk: float = 0.1
+    line_straightness: float = 0.005
+    line_occupancy: float = 0.7
+    line_hypotheses: int = 300
 
     def __post_init__(self) -> None:
         positive = (
@@ -359,9 +365,11 @@ def reconstruct_pipes(
 
     # §4.3, Fig. 16(a): the points of the vertical pipes are removed.
     rest_idx = np.flatnonzero(~vertical_mask)
+    lines, line_mask = _straight_pipes(pts, rest_idx, p)
+    rest_idx = rest_idx[~line_mask]
     others = _non_vertical_pipes(pts, rest_idx, x0, p, notes)
 
-    skels = verticals + others
+    skels = verticals + lines + [s for s in others if not _runs_along(s, lines, p)]
     # §4.3: ends extended to the poles, and to the intersection of close ends.
     _extend_and_join(skels, length, p)
     # Radius and depth of each pipe from its points.
@@ -463,6 +471,160 @@ def _horizontal_bands(y: np.ndarray, sel: np.ndarray, p: PipeParams) -> np.ndarr
     dense = cnt > p.histogram_factor * max(np.median(cnt[cnt > 0]), 1.0)
     out[sel] = dense[b[sel]]
     return out
+
+
+# ----------------------------------------------------------------------------------------------
+# Straight pipes: sequential line search
+# ----------------------------------------------------------------------------------------------
+
+
+def _line_run(
+    t: np.ndarray, off: np.ndarray, p: PipeParams
+) -> tuple[float, float, np.ndarray] | None:
+    """The longest gap-free run of projections ``t`` and whether it is a straight pipe."""
+    if len(t) < p.min_points:
+        return None
+    order = np.argsort(t)
+    ts = t[order]
+    breaks = np.flatnonzero(np.diff(ts) > p.link_gap)
+    starts = np.concatenate([[0], breaks + 1])
+    ends = np.concatenate([breaks, [len(ts) - 1]])
+    k = int(np.argmax(ends - starts))
+    t0, t1 = float(ts[starts[k]]), float(ts[ends[k]])
+    if t1 - t0 < p.line_min_length or ends[k] - starts[k] + 1 < p.min_points:
+        return None
+    sel = (t >= t0) & (t <= t1)
+    n_chunks = max(2, int(round((t1 - t0) / p.line_chunk)))
+    chunk = np.minimum(((t[sel] - t0) / (t1 - t0) * n_chunks).astype(np.int64), n_chunks - 1)
+    cnt = np.bincount(chunk, minlength=n_chunks)
+    if np.mean(cnt >= 2) < p.line_occupancy:
+        return None
+    o = off[sel]
+    med = float(np.median(o))
+    full = np.flatnonzero(cnt >= 4)
+    bad = sum(abs(float(np.median(o[chunk == c])) - med) > p.line_straightness for c in full)
+    if bad > 0.2 * len(full):
+        return None
+    return t0, t1, sel
+
+
+def _straight_pipes(
+    pts: np.ndarray, rest_idx: np.ndarray, p: PipeParams
+) -> tuple[list[_Skel], np.ndarray]:
+    """Straight non-vertical pipes found one after another (most points first).
+
+    Line hypotheses through pairs of points are scored by the points within ``line_band``; the
+    best is refitted, cut to its longest gap-free run and kept when that run is at least
+    ``line_min_length`` long, populated along ``line_occupancy`` of its length and straight
+    (the median offset of every ``line_chunk`` piece within ``line_straightness`` of the
+    whole's: a curved pipe fails this). The kept line's points are removed from the search.
+    """
+    removed = np.zeros(len(rest_idx), dtype=bool)
+    hidden = np.zeros(len(rest_idx), dtype=bool)
+    skels: list[_Skel] = []
+    if len(rest_idx) < p.min_points:
+        return skels, hidden
+    xy = pts[rest_idx, :2]
+    rng = np.random.default_rng(0)
+    failed: list[tuple[np.ndarray, np.ndarray]] = []
+    for _ in range(16):
+        live = np.flatnonzero(~removed)
+        if len(live) < p.min_points:
+            break
+        sub = live if len(live) <= 3000 else rng.choice(live, 3000, replace=False)
+        a = xy[rng.choice(sub, p.line_hypotheses)]
+        b = xy[rng.choice(sub, p.line_hypotheses)]
+        d = b - a
+        n = np.linalg.norm(d, axis=1)
+        ok = (n >= p.line_chunk) & (np.abs(d[:, 0]) > 1e-6)
+        if not ok.any():
+            break
+        a, d = a[ok], d[ok] / n[ok, None]
+        normal = np.column_stack([-d[:, 1], d[:, 0]])
+        off = np.abs(
+            (xy[sub, 0][None, :] - a[:, :1]) * normal[:, :1]
+            + (xy[sub, 1][None, :] - a[:, 1:]) * normal[:, 1:]
+        )
+        score = (off <= p.line_band).sum(axis=1)
+        accepted = False
+        for h in np.argsort(-score)[:8]:
+            if score[h] < p.min_points:
+                break
+            c, u = a[h], d[h]
+            if any(
+                abs(u[0] * fu[1] - u[1] * fu[0]) < 0.05
+                and abs((c - fc) @ [-fu[1], fu[0]]) < p.line_band
+                for fc, fu in failed
+            ):
+                continue
+            res = _refine_line(xy, live, c, u, p)
+            if res is None:
+                failed.append((c, u))
+                continue
+            c, u, t0, t1, half = res
+            nrm = np.array([-u[1], u[0]])
+            rel = xy - c
+            t_all, o_all = rel @ u, rel @ nrm
+            angle = math.degrees(math.atan2(abs(u[1]), abs(u[0])))
+            kind = "horizontal" if angle <= p.horizontal_angle else "diagonal"
+            band = (np.abs(o_all) <= half) & (t_all >= t0 - half) & (t_all <= t1 + half)
+            idx = rest_idx[band & ~removed]
+            removed |= band
+            # The core of a horizontal rail stays for the chains that touch it tangentially.
+            hidden |= band if kind == "diagonal" else band & (np.abs(o_all) > 0.6 * half)
+            end = c + np.outer([t0, t1], u)
+            if end[0, 0] > end[1, 0]:
+                end = end[::-1]
+            if kind == "horizontal":
+                end[:, 1] = end[:, 1].mean()
+            extras = {"centres": end.copy(), "shared": np.zeros(2, bool), "own": idx}
+            skels.append(_Skel(xy=end, kind=kind, idx=idx, extras=extras))
+            accepted = True
+            break
+        if not accepted:
+            break
+    return skels, hidden
+
+
+def _runs_along(s: _Skel, lines: list[_Skel], p: PipeParams) -> bool:
+    """Whether a chained skeleton mostly follows one of the straight pipes (a duplicate)."""
+    probe = _resample(s.xy, p.slice_interval)
+    for line in lines:
+        dist, _ = _distance_to_polyline(probe, line.xy)
+        if np.mean(dist <= p.link_distance) >= 0.5:
+            return True
+    return False
+
+
+def _refine_line(
+    xy: np.ndarray, live: np.ndarray, c: np.ndarray, u: np.ndarray, p: PipeParams
+) -> tuple[np.ndarray, np.ndarray, float, float, float] | None:
+    """Refit a line hypothesis to its band's points; its run, or None when no straight pipe."""
+    for _ in range(3):
+        nrm = np.array([-u[1], u[0]])
+        rel = xy[live] - c
+        o = rel @ nrm
+        inb = np.abs(o) <= p.line_band
+        if inb.sum() < p.min_points:
+            return None
+        run = _line_run(rel[inb] @ u, o[inb], p)
+        if run is None:
+            return None
+        q = xy[live][inb][run[2]]
+        c, u = _fit_line(q)
+    nrm = np.array([-u[1], u[0]])
+    rel = xy[live] - c
+    o = rel @ nrm
+    inb = np.abs(o) <= p.line_band
+    run = _line_run(rel[inb] @ u, o[inb], p)
+    if run is None:
+        return None
+    t0, t1, sel = run
+    oo = o[inb][sel]
+    lo, hi = _central_quantiles(oo, p.radius_share)
+    half = min(max(0.5 * (hi - lo) / p.radius_share, 0.005) + p.assign_margin, 2 * p.line_band)
+    c = c + 0.5 * (lo + hi) * nrm
+    return c, u, t0, t1, half
 
 
 # ----------------------------------------------------------------------------------------------

@@ -38,6 +38,9 @@ class UnitParams:
     still belong to the end unit; farther ones to none."""
     max_offset_m: float = 1.0
     """Metres. Points farther than this from a unit's pole plane (|z|) belong to no unit."""
+    ground_clearance_m: float = 0.05
+    """Metres. Points lower than this above a unit's ground line are ground the classifier took
+    for guardrail (no rail runs that low), not the unit shape."""
     missing_pole_ratio: float = 1.6
     """A gap longer than this many times the median gap between poles has missing poles:
     round(gap / median) - 1 virtual poles are inserted in it."""
