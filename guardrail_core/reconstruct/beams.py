@@ -17,7 +17,7 @@ import numpy as np
 
 from guardrail_core.errors import ReconstructionError
 from guardrail_core.reconstruct.pipes import check_unit_points
-from guardrail_core.reconstruct.smoothing import taubin_smooth
+from guardrail_core.reconstruct.smoothing import check_taubin_params, taubin_smooth
 
 __all__ = ["BeamParams", "BeamReconstruction", "reconstruct_beam", "unit_type"]
 
@@ -113,16 +113,11 @@ class BeamParams:
             v = getattr(self, name)
             if not 0.0 < v <= 1.0:
                 raise ReconstructionError(f"BeamParams.{name} must be in (0, 1], got {v}")
-        if not 0.0 < self.taubin_lambda < 1.0 or not self.taubin_mu < -self.taubin_lambda:
-            raise ReconstructionError(
-                "BeamParams needs 0 < taubin_lambda < 1 and taubin_mu < -taubin_lambda, "
-                f"got {self.taubin_lambda}, {self.taubin_mu}"
-            )
-        if self.taubin_iterations < 0 or self.min_points < 1:
-            raise ReconstructionError(
-                "BeamParams needs taubin_iterations >= 0 and min_points >= 1, "
-                f"got {self.taubin_iterations}, {self.min_points}"
-            )
+        check_taubin_params(
+            "BeamParams", self.taubin_lambda, self.taubin_mu, self.taubin_iterations
+        )
+        if self.min_points < 1:
+            raise ReconstructionError(f"BeamParams.min_points must be >= 1, got {self.min_points}")
 
 
 @dataclass(frozen=True)

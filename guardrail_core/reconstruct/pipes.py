@@ -45,7 +45,7 @@ from scipy.spatial import Delaunay, QhullError, cKDTree
 
 from guardrail_core.errors import ReconstructionError
 from guardrail_core.reconstruct.model import PIPE_KINDS, Pipe
-from guardrail_core.reconstruct.smoothing import taubin_smooth
+from guardrail_core.reconstruct.smoothing import check_taubin_params, taubin_smooth
 
 _FORBIDDEN = 1e9  # assignment cost of a centre out of a polyline's reach
 
@@ -215,16 +215,11 @@ class PipeParams:
                 raise ReconstructionError(
                     f"PipeParams.{name} must be in [0, 90) degrees, got {value}"
                 )
-        if not 0.0 < self.taubin_lambda < 1.0 or not self.taubin_mu < -self.taubin_lambda:
-            raise ReconstructionError(
-                "PipeParams needs 0 < taubin_lambda < 1 and taubin_mu < -taubin_lambda, "
-                f"got {self.taubin_lambda}, {self.taubin_mu}"
-            )
-        if self.taubin_iterations < 0 or self.min_points < 1:
-            raise ReconstructionError(
-                "PipeParams needs taubin_iterations >= 0 and min_points >= 1, "
-                f"got {self.taubin_iterations}, {self.min_points}"
-            )
+        check_taubin_params(
+            "PipeParams", self.taubin_lambda, self.taubin_mu, self.taubin_iterations
+        )
+        if self.min_points < 1:
+            raise ReconstructionError(f"PipeParams.min_points must be >= 1, got {self.min_points}")
 
 
 @dataclass(frozen=True)
