@@ -71,11 +71,41 @@ def _train(args: argparse.Namespace) -> int:
     from guardrail_core.training import train_from_drives
 
     params = ClassifierParams(mode=args.mode, seed=args.seed)
-    model = train_from_drives(args.drives, params=params, progress=not args.quiet)
+    if bool(args.drives) == bool(args.run):
+        from guardrail_core.errors import InvalidOptionError
+
+        raise InvalidOptionError(
+            "give either DRIVE... (labels from their truth/) or --run RUN_DIR (labels from the "
+            "review app's label store), not both or neither"
+        )
+    if args.run:
+        model = _train_from_labels(args, params)
+    else:
+        model = train_from_drives(args.drives, params=params, progress=not args.quiet)
     save_model(model, args.out, overwrite=args.overwrite)
     print(f"trained a {model.mode} model {model.version} into {args.out}")
     print(_held_out_report(model.info))
     return 0
+
+
+def _train_from_labels(args: argparse.Namespace, params):
+    from guardrail_core.label_store import LabelStore, default_store_path
+    from guardrail_core.review_training import train_from_run
+    from guardrail_core.run_folder import load_run
+
+    run = load_run(args.run)
+    path = args.labels or default_store_path(Path(run.info["drive"]["path"]))
+    if not Path(path).is_file():
+        from guardrail_core.errors import LabelStoreError
+
+        raise LabelStoreError(f"{path}: no label store there; give it with --labels")
+    with LabelStore(path, n_points=len(run.point_segment)) as store:
+        labels = store.point_labels().copy()
+    counts = int((labels >= 0).sum())
+    print(f"{counts:,} operator-labelled points from {path}")
+    return train_from_run(
+        run, labels, params=params, include_unreviewed=not args.reviewed_only
+    ).model
 
 
 def _held_out_report(info: dict) -> str:
@@ -276,6 +306,15 @@ def _add_reconstruction_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_plugin_commands(sub: argparse._SubParsersAction) -> None:
+    """Commands other packages register under the ``guardrail.commands`` entry points (the
+    review app's ``serve``): the library never imports the app, the app plugs into the CLI."""
+    from importlib.metadata import entry_points
+
+    for entry in sorted(entry_points(group="guardrail.commands"), key=lambda e: e.name):
+        entry.load()(sub)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="guardrail",
@@ -337,11 +376,30 @@ def build_parser() -> argparse.ArgumentParser:
 
     train = sub.add_parser(
         "train",
-        help="train the guardrail classifier on labelled drives",
+        help="train the guardrail classifier on labelled drives or on operators' labels",
         description="Extract the segments of each DRIVE, label their crops from truth/, and "
-        "fine-tune the ImageNet-pretrained EfficientNet-Lite0 (two classes: guardrail, other).",
+        "fine-tune the ImageNet-pretrained EfficientNet-Lite0 (two classes: guardrail, other). "
+        "With --run RUN_DIR instead, train on that run's segments labelled by operators in the "
+        "review app (`guardrail serve`).",
     )
-    train.add_argument("drives", type=Path, nargs="+", metavar="DRIVE")
+    train.add_argument("drives", type=Path, nargs="*", metavar="DRIVE")
+    train.add_argument(
+        "--run",
+        type=Path,
+        metavar="RUN_DIR",
+        help="train from a run folder and the operators' labels instead of drives' truth",
+    )
+    train.add_argument(
+        "--labels",
+        type=Path,
+        help="the label store (default: DRIVE/review/labels.sqlite of the run's drive)",
+    )
+    train.add_argument(
+        "--reviewed-only",
+        action="store_true",
+        help="with --run: only segments an operator labelled (default: the others keep the "
+        "run's corrected labels)",
+    )
     train.add_argument("--out", type=Path, required=True, help="model folder to write")
     train.add_argument(
         "--mode",
@@ -406,6 +464,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_reconstruction_options(reconstruct)
     reconstruct.add_argument("--quiet", action="store_true", help="no progress bars")
     reconstruct.set_defaults(func=_reconstruct)
+
+    _add_plugin_commands(sub)
+
 
     demo = sub.add_parser(
         "demo",

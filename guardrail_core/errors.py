@@ -74,3 +74,8 @@ class RunFolderError(GuardrailError):
 
 class ReconstructionError(GuardrailError):
     """Guardrail points cannot be reconstructed as asked (bad parameters, no guardrail at all)."""
+
+
+class LabelStoreError(GuardrailError):
+    """An operators' label store cannot be opened or used (not a label store, a newer schema
+    version, made for another number of points, or closed)."""

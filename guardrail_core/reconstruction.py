@@ -38,7 +38,7 @@ from guardrail_core.reconstruct.inventory import (
 )
 from guardrail_core.reconstruct.model import RunModel, UnitModel
 from guardrail_core.reconstruct.model_json import run_model_from_json, run_model_to_json
-from guardrail_core.reconstruct.pipes import PipeParams, reconstruct_pipes
+from guardrail_core.reconstruct.pipes import PipeHistogram, PipeParams, reconstruct_pipes
 from guardrail_core.reconstruct.poles import PoleParams, detect_poles
 from guardrail_core.reconstruct.register import RegisterParams, Superimposition, superimpose
 from guardrail_core.reconstruct.runs import RunParams, group_runs
@@ -131,7 +131,15 @@ class Reconstruction:
     superimposed: list[Superimposition | None]
 
 
-def unit_model(
+@dataclass(frozen=True)
+class UnitReconstruction:
+    """A unit model and, for pipes, the x histogram its vertical pipes came from (Fig. 14)."""
+
+    model: UnitModel
+    histogram: PipeHistogram | None
+
+
+def reconstruct_unit(
     points: np.ndarray,
     length: float,
     *,
@@ -139,7 +147,7 @@ def unit_model(
     pole_height: float,
     n_units: int,
     params: ReconstructionParams = ReconstructionParams(),
-) -> UnitModel:
+) -> UnitReconstruction:
     """The unit model of superimposed unit points: beam section or pipes (§4.3-4.4).
 
     This is the step the review app re-runs when an operator moves a threshold.
@@ -152,7 +160,7 @@ def unit_model(
     kind = unit_type(points, length, params.beams)
     if kind == "beam":
         beam = reconstruct_beam(points, length, pole_radius, params.beams)
-        return UnitModel(
+        model = UnitModel(
             type="beam",
             length=length,
             section=beam.section,
@@ -161,8 +169,9 @@ def unit_model(
             n_units=n_units,
             notes=tuple(beam.notes),
         )
+        return UnitReconstruction(model, None)
     pipes = reconstruct_pipes(points, length, pole_radius, params.pipes)
-    return UnitModel(
+    model = UnitModel(
         type="pipe",
         length=length,
         pipes=tuple(pipes.pipes),
@@ -171,6 +180,27 @@ def unit_model(
         n_units=n_units,
         notes=tuple(pipes.notes),
     )
+    return UnitReconstruction(model, pipes.histogram)
+
+
+def unit_model(
+    points: np.ndarray,
+    length: float,
+    *,
+    pole_radius: float,
+    pole_height: float,
+    n_units: int,
+    params: ReconstructionParams = ReconstructionParams(),
+) -> UnitModel:
+    """The unit model alone (see :func:`reconstruct_unit`)."""
+    return reconstruct_unit(
+        points,
+        length,
+        pole_radius=pole_radius,
+        pole_height=pole_height,
+        n_units=n_units,
+        params=params,
+    ).model
 
 
 def reconstruct_run(

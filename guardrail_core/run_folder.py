@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import csv
 import json
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -115,6 +116,57 @@ def write_run_files(
     (folder / "run.json").write_text(json.dumps(info, indent=2) + "\n")
     (folder / "timings.json").write_text(json.dumps(timings, indent=2) + "\n")
     _write_csv(folder / "segments.csv", segments, image_files)
+
+
+def replace_run_tables(
+    root: str | Path, *, segments: dict[str, np.ndarray], info: dict[str, Any]
+) -> None:
+    """Replace a run folder's ``segments.csv``, ``segments.npz`` and ``run.json`` in place.
+
+    Each file is written whole to a temporary file in the folder, flushed to disk and moved over
+    the old one with :func:`os.replace` (atomic), in the order csv, npz, json: a reader never sees
+    a half-written file, and run.json (the model the run names) changes last.
+
+    Parameters
+    ----------
+    root : the run folder
+    segments : every SEGMENT_FIELDS array, each with S rows
+    info : the new run.json content (``format_version`` and ``images`` included)
+
+    Raises
+    ------
+    ValueError
+        A segments array is missing or has the wrong shape; nothing is written then.
+    """
+    root = Path(root)
+    n = len(segments["n_points"])
+    for name, (_, shape) in SEGMENT_FIELDS.items():
+        if name not in segments or np.shape(segments[name]) != (n, *shape):
+            got = np.shape(segments[name]) if name in segments else "nothing"
+            raise ValueError(f"segments[{name!r}]: expected shape {(n, *shape)}, got {got}")
+    table: dict[str, Any] = {
+        name: np.asarray(segments[name], dtype) for name, (dtype, _) in SEGMENT_FIELDS.items()
+    }
+    text = json.dumps(info, indent=2) + "\n"
+    staged: list[tuple[Path, Path]] = []
+    try:
+        for name in ("segments.csv", "segments.npz", "run.json"):
+            tmp = root / f".{name}.tmp{os.getpid()}"
+            staged.append((tmp, root / name))
+            if name == "segments.csv":
+                _write_csv(tmp, table, list(info["images"]))
+            elif name == "segments.npz":
+                with tmp.open("wb") as f:
+                    np.savez_compressed(f, **table)
+            else:
+                tmp.write_text(text)
+            with tmp.open("rb+") as f:
+                os.fsync(f.fileno())
+        for tmp, target in staged:
+            os.replace(tmp, target)
+    finally:
+        for tmp, _ in staged:
+            tmp.unlink(missing_ok=True)
 
 
 def _write_csv(path: Path, segments: dict[str, np.ndarray], image_files: list[str]) -> None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
@@ -14,9 +14,10 @@ import numpy as np
 from tqdm import tqdm
 
 from guardrail_core.drive import load_drive
-from guardrail_core.errors import MissingDriveFileError, TrainingDataError
+from guardrail_core.errors import InvalidOptionError, MissingDriveFileError, TrainingDataError
 from guardrail_core.evaluate import segment_truth
 from guardrail_core.extract.classify import (
+    EMBEDDING_DIM,
     ClassifierParams,
     GuardrailClassifier,
     classification_metrics,
@@ -37,7 +38,7 @@ HOLD_OUT_BLOCK_SLICES = 20
 
 @dataclass(frozen=True)
 class TrainingSet:
-    """Labelled segments of drives, with their crops.
+    """Labelled segments of drives (or of a run folder), with their crops or crop embeddings.
 
     Attributes
     ----------
@@ -45,16 +46,21 @@ class TrainingSet:
     labels : (S,) bool, True for guardrail
     groups : (S,) int64, spatial block of each segment (for held-out splits and folds)
     has_crop : (S,) bool, the segment has a crop
-    crops : (K, C, C, 3) uint8 RGB, the crops of the segments with one, in segment order
-    sources : per drive: its path and its counts
+    crops : (K, C, C, 3) uint8 RGB, the crops of the K segments with one, in segment order; may
+        be None when ``embeddings`` are given (fast mode only)
+    sources : per drive (or run): its path and its counts
+    embeddings : (K, 1280) float32 or None, frozen-backbone embeddings of the same K crops
+        (:func:`~guardrail_core.extract.classify.embed_crops`); fast mode uses them instead of
+        embedding the crops
     """
 
     features: np.ndarray
     labels: np.ndarray
     groups: np.ndarray
     has_crop: np.ndarray
-    crops: np.ndarray
+    crops: np.ndarray | None
     sources: list[dict[str, Any]]
+    embeddings: np.ndarray | None = None
 
 
 def labelled_segments(
@@ -121,14 +127,8 @@ def train_from_drives(
 ) -> GuardrailClassifier:
     """Train the crop classifier and the segment head on labelled drives.
 
-    1. The crop classifier on every crop (:func:`train_classifier`; its held-out figures go to
-       ``info["metrics"]["held_out_crops"]``).
-    2. Out-of-fold crop probabilities: the blocks are dealt into ``head.folds`` folds and each
-       fold's crops are classified by a crop classifier trained on the other folds (in full mode
-       that is ``head.folds`` more fine-tunings).
-    3. The segment head on every segment, from its features and its out-of-fold crop
-       probability; measured first on held-out blocks (``info["metrics"]["held_out"]``, every
-       segment, with or without a crop), then refit on all.
+    Extracts the drives' segments and labels them from ``truth/`` (:func:`labelled_segments`),
+    then trains on them with :func:`train_on_set`.
 
     Raises
     ------
@@ -138,20 +138,99 @@ def train_from_drives(
     if not drive_paths:
         raise TrainingDataError("no drives given to train on")
     data = labelled_segments(drive_paths, params.input_size, extraction, progress=progress)
+    model, _ = train_on_set(
+        data,
+        params=params,
+        head=head,
+        progress=progress,
+        trained_on={"drives": data.sources, "labels": "truth"},
+    )
+    return model
+
+
+def train_on_set(
+    data: TrainingSet,
+    *,
+    params: ClassifierParams,
+    head: SegmentHeadParams,
+    progress: bool = False,
+    progress_fn: Callable[[float, str], None] | None = None,
+    trained_on: dict[str, Any] | None = None,
+) -> tuple[GuardrailClassifier, np.ndarray]:
+    """Train the crop classifier and the segment head on a training set.
+
+    1. The crop classifier on every crop (:func:`train_classifier`; its held-out figures go to
+       ``info["metrics"]["held_out_crops"]``).
+    2. Out-of-fold crop probabilities: the blocks are dealt into ``head.folds`` folds and each
+       fold's crops are classified by a crop classifier trained on the other folds (in full mode
+       that is ``head.folds`` more fine-tunings).
+    3. The segment head on every segment, from its features and its out-of-fold crop
+       probability; measured first on held-out blocks (``info["metrics"]["held_out"]``, every
+       segment, with or without a crop), then refit on all.
+
+    Parameters
+    ----------
+    data : the labelled segments; fast mode uses ``data.embeddings`` when given (``data.crops``
+        may then be None), else embeds ``data.crops``; full mode needs ``data.crops``
+    params : crop classifier parameters (mode, seed, held-out fraction, threshold)
+    head : segment head parameters
+    progress : show tqdm bars
+    progress_fn : called as ``progress_fn(fraction, message)`` with fraction 0..1 before each
+        step (embedding, crop classifier, each fold, segment head) and with 1.0 at the end
+    trained_on : description of the data stored in ``info["trained_on"]``; the counts
+        ``segments``, ``crops``, ``guardrail`` and ``other`` are added
+
+    Returns
+    -------
+    model : GuardrailClassifier, with its segment head
+    held_out : (S,) bool, the segments ``info["metrics"]["held_out"]`` was measured on (all
+        False when nothing could be held out; the metrics are then None)
+
+    Raises
+    ------
+    TrainingDataError
+        Too few crops, or segments or crops of one class only.
+    InvalidOptionError
+        Full mode without crops, or embeddings of the wrong shape.
+    """
     crop_rows = np.flatnonzero(data.has_crop)
     trained_on = {
-        "drives": data.sources,
+        **(trained_on or {}),
         "segments": len(data.labels),
         "crops": len(crop_rows),
         "guardrail": int(data.labels.sum()),
         "other": int((~data.labels).sum()),
-        "labels": "truth",
     }
     embeddings = None
-    if params.mode == "fast" and len(crop_rows):
+    if params.mode == "fast" and data.embeddings is not None:
+        embeddings = np.asarray(data.embeddings, np.float32)
+        if embeddings.shape != (len(crop_rows), EMBEDDING_DIM):
+            raise InvalidOptionError(
+                f"training set: expected ({len(crop_rows)}, {EMBEDDING_DIM}) embeddings (one per "
+                f"crop), got {embeddings.shape}"
+            )
+    elif data.crops is None:
+        raise InvalidOptionError(
+            f"training set: {params.mode} mode needs the crops"
+            + ("" if params.mode == "full" else " or their embeddings")
+            + ", got neither"
+        )
+    steps = 1 + head.folds + 2 + (embeddings is None and params.mode == "fast")
+    done = 0
+
+    def report(message: str) -> None:
+        nonlocal done
+        if progress_fn is not None:
+            progress_fn(min(done / steps, 1.0), message)
+        done += 1
+
+    if params.mode == "fast" and embeddings is None and len(crop_rows):
+        report(f"embedding {len(crop_rows)} crops")
+        assert data.crops is not None
         embeddings = embed_crops(data.crops, progress=progress)
+    report("training the crop classifier")
     model = train_classifier(
-        data.crops,
+        None if embeddings is not None else data.crops,
         data.labels[crop_rows],
         groups=data.groups[crop_rows],
         embeddings=embeddings,
@@ -161,11 +240,17 @@ def train_from_drives(
     )
     clock = time.perf_counter()
     crop_proba, missing_folds = _out_of_fold_crop_proba(
-        data, embeddings, params, head.folds, progress=progress
+        data,
+        embeddings,
+        params,
+        head.folds,
+        progress=progress,
+        on_fold=lambda k: report(f"crop classifier of fold {k + 1}/{head.folds}"),
     )
     rng = np.random.default_rng(params.seed)
     held = held_out_mask(data.labels, data.groups, params.held_out_fraction, rng)
     held_out = None
+    report("segment head: measuring on held-out blocks")
     if held.any():
         measured = fit_segment_head(
             data.features[~held], crop_proba[~held], data.labels[~held], head, seed=params.seed
@@ -179,6 +264,7 @@ def train_from_drives(
             n_groups_held_out=int(len(np.unique(data.groups[held]))),
             threshold=params.threshold,
         )
+    report("segment head: training on all segments")
     model.segment_head = fit_segment_head(
         data.features, crop_proba, data.labels, head, seed=params.seed
     )
@@ -191,7 +277,9 @@ def train_from_drives(
         "seconds": round(time.perf_counter() - clock, 2),
     }
     info["version"] = model_version(datetime.fromisoformat(info["created"]), model.weights())
-    return model
+    if progress_fn is not None:
+        progress_fn(1.0, "done")
+    return model, held
 
 
 def _out_of_fold_crop_proba(
@@ -201,6 +289,7 @@ def _out_of_fold_crop_proba(
     folds: int,
     *,
     progress: bool,
+    on_fold: Callable[[int], None] | None = None,
 ) -> tuple[np.ndarray, int]:
     """(S,) crop P(guardrail) of every segment from a classifier that did not see its block's
     crops (NaN without a crop), and the number of folds whose other folds held too few crops of
@@ -214,12 +303,16 @@ def _out_of_fold_crop_proba(
     labels = data.labels[crop_rows]
     missing = 0
     for k in tqdm(range(folds), desc="crop folds", unit="fold", disable=not progress):
+        if on_fold is not None:
+            on_fold(k)
         train, test = np.flatnonzero(fold != k), np.flatnonzero(fold == k)
         if len(test) == 0:
             continue
+        # fast: the embeddings, no copy of the crops (train_on_set made sure one is there)
+        crops = None if embeddings is not None or data.crops is None else data.crops[train]
         try:
             model = train_classifier(
-                data.crops[train] if embeddings is None else None,  # fast: no copy of crops
+                crops,
                 labels[train],
                 embeddings=None if embeddings is None else embeddings[train],
                 params=fold_params,
@@ -229,6 +322,6 @@ def _out_of_fold_crop_proba(
             continue
         if embeddings is not None:
             proba[crop_rows[test]] = model.predict_proba(embeddings=embeddings[test])
-        else:
+        elif data.crops is not None:
             proba[crop_rows[test]] = model.predict_proba(data.crops[test])
     return proba, missing

@@ -1,0 +1,66 @@
+"""The FastAPI application: assembles the routers, the token check and the static pages."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+from fastapi import Depends, FastAPI, Request
+from fastapi.responses import RedirectResponse
+from fastapi.staticfiles import StaticFiles
+
+from app.auth import require_token
+from app.jobs import JobRunner
+from app.routers import info, labels, queue, reconstruction, segments, training
+from app.session import ReviewSession
+
+#: The pages (``static/`` at the repository root, beside ``app/``).
+STATIC_DIR = Path(__file__).resolve().parent.parent / "static"
+
+
+def create_app(
+    session: ReviewSession,
+    *,
+    token: str | None = None,
+    jobs: JobRunner | None = None,
+    scene_port: int | None = None,
+    scene_clients: Callable[[], int] = lambda: 0,
+) -> FastAPI:
+    """The review app for one session.
+
+    Parameters
+    ----------
+    session : the drive, run and labels under review
+    token : when set, every ``/api`` call must carry it
+    jobs : the background job runner (a new one by default)
+    scene_port : the viser server's port, for the pages' 3D view
+    scene_clients : how many browsers the 3D scene has connected (for ``/api/info``)
+    """
+    app = FastAPI(
+        title="Guardrail review",
+        description="Review guardrail detections, fix labels, fine-tune the classifier and "
+        "tune the reconstruction (Matsumoto et al. 2019).",
+        version="1",
+    )
+    app.state.session = session
+    app.state.token = token
+    app.state.jobs = jobs or JobRunner()
+    app.state.scene_port = scene_port
+    app.state.scene_clients = scene_clients
+    guarded = [Depends(require_token)]
+    for module in (info, segments, labels, queue, training, reconstruction):
+        app.include_router(module.router, dependencies=guarded)
+    if STATIC_DIR.is_dir():
+        app.mount("/static", StaticFiles(directory=STATIC_DIR), name="static")
+
+    def page(name: str) -> Callable[[Request], RedirectResponse]:
+        def redirect(request: Request) -> RedirectResponse:
+            query = request.url.query  # keeps ?token= for the page's API calls
+            return RedirectResponse(f"/static/{name}" + (f"?{query}" if query else ""))
+
+        return redirect
+
+    app.get("/", include_in_schema=False)(page("index.html"))
+    app.get("/gallery", include_in_schema=False)(page("gallery.html"))
+
+    return app

@@ -1,0 +1,114 @@
+"""The models an operator can activate: those fine-tuned in the app, and the one that made the run.
+
+Each fine-tuned model is a model folder ``REVIEW_DIR/models/<version>/`` (see
+:mod:`guardrail_core.extract.model_store`). The active model is the one whose predictions the run
+folder holds (``run.json``'s ``model.version``): activating a model re-predicts the run and writes
+its predictions into the run folder.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+from guardrail_core.extract.classify import GuardrailClassifier
+from guardrail_core.extract.model_store import MODEL_FILE, load_model, save_model
+from guardrail_core.run_folder import Run
+
+
+class UnknownModelError(KeyError):
+    """No model folder of that version is known to the app."""
+
+
+class ModelRegistry:
+    """Model folders by version.
+
+    Parameters
+    ----------
+    folder : where fine-tuned models are saved
+    run : the run under review (its ``run.json`` names the active model)
+    run_model_dir : the folder of the model that made the run, when known
+    """
+
+    def __init__(self, folder: Path, run: Run, run_model_dir: str | Path | None = None) -> None:
+        self.folder = Path(folder)
+        self.run = run
+        self.run_model_dir = Path(run_model_dir) if run_model_dir else None
+
+    @property
+    def active_version(self) -> str:
+        return str(self.run.info["model"]["version"])
+
+    def _folders(self) -> dict[str, Path]:
+        folders: dict[str, Path] = {}
+        if self.run_model_dir is not None and (self.run_model_dir / MODEL_FILE).is_file():
+            folders[_read_info(self.run_model_dir)["version"]] = self.run_model_dir
+        if self.folder.is_dir():
+            for path in sorted(self.folder.iterdir()):
+                if (path / MODEL_FILE).is_file():
+                    folders[path.name] = path
+        return folders
+
+    def list(self) -> list[dict[str, Any]]:
+        """Every known model, newest first, with its held-out figures."""
+        rows = []
+        folders = self._folders()
+        for version, path in folders.items():
+            info = _read_info(path)
+            rows.append(_row(info, active=version == self.active_version))
+        if self.active_version not in folders:  # made the run, folder not given
+            rows.append(
+                {
+                    "version": self.active_version,
+                    "created": None,
+                    "mode": self.run.info["model"].get("mode"),
+                    "held_out": None,
+                    "held_out_current": None,
+                    "active": True,
+                    "folder_known": False,
+                }
+            )
+        return sorted(rows, key=lambda r: r["created"] or "", reverse=True)
+
+    def info(self, version: str) -> dict[str, Any]:
+        """The active (or given) model's row; metrics are None where its folder is not known."""
+        for row in self.list():
+            if row["version"] == version:
+                return row
+        raise UnknownModelError(version)
+
+    def add(self, model: GuardrailClassifier) -> Path:
+        """Save a fine-tuned model as ``folder/<version>``."""
+        return save_model(model, self.folder / model.version)
+
+    def load(self, version: str) -> GuardrailClassifier:
+        """The model of that version.
+
+        Raises
+        ------
+        UnknownModelError
+            No folder of that version is known.
+        """
+        folders = self._folders()
+        if version not in folders:
+            raise UnknownModelError(version)
+        return load_model(folders[version])
+
+
+def _read_info(folder: Path) -> dict[str, Any]:
+    return json.loads((folder / MODEL_FILE).read_text(encoding="utf-8"))
+
+
+def _row(info: dict[str, Any], *, active: bool) -> dict[str, Any]:
+    metrics = info.get("metrics", {})
+    return {
+        "version": info["version"],
+        "created": info.get("created"),
+        "mode": info.get("mode"),
+        "held_out": metrics.get("held_out"),
+        "held_out_current": metrics.get("held_out_current"),
+        "trained_on": info.get("trained_on"),
+        "active": active,
+        "folder_known": True,
+    }

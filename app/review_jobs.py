@@ -1,0 +1,92 @@
+"""The work of the app's background jobs: fine-tuning from the label store, activating a model,
+re-running the reconstruction with the operator's labels and thresholds."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from app.session import ReviewSession
+from guardrail_core.extract.classify import ClassifierParams
+from guardrail_core.reconstruction import ReconstructionParams, reconstruct_into
+from guardrail_core.review_training import predict_run, train_from_run, write_predictions
+
+Report = Callable[[float, str], None]
+
+
+def fine_tune(
+    session: ReviewSession, *, mode: str = "fast", include_unreviewed: bool = True
+) -> Callable[[Report], dict[str, Any]]:
+    """A job that trains a model from the store's labels and saves it (not activated)."""
+    point_labels = session.point_labels().copy()  # a snapshot: labelling goes on meanwhile
+    run = session.run
+
+    def work(report: Report) -> dict[str, Any]:
+        report(0.0, "collecting labels")
+        trained = train_from_run(
+            run,
+            point_labels,
+            params=ClassifierParams(mode=mode),
+            include_unreviewed=include_unreviewed,
+            progress_fn=lambda f, m: report(0.95 * f, m),
+        )
+        report(0.96, "saving the model")
+        session.models.add(trained.model)
+        return {
+            "version": trained.model.version,
+            "metrics_new": trained.metrics_new,
+            "metrics_current": trained.metrics_current,
+            "current_version": run.info["model"]["version"],
+            "held_out_segments": int(trained.held_out.sum()),
+            "seconds": round(trained.seconds, 2),
+        }
+
+    return work
+
+
+def activate(session: ReviewSession, version: str) -> dict[str, Any]:
+    """Re-predict the run with the model ``version`` and write its predictions into the run.
+
+    Raises
+    ------
+    app.model_registry.UnknownModelError
+        No folder of that version is known.
+    """
+    model = session.models.load(version)
+    before = session.effective_label().copy()
+    with session.lock:
+        predictions = predict_run(session.run, model)
+        write_predictions(session.run.root, predictions, model)
+    session.reload_run()
+    return {
+        "active": session.models.active_version,
+        "changed_segments": int((session.effective_label() != before).sum()),
+    }
+
+
+def reconstruct(
+    session: ReviewSession, params: ReconstructionParams
+) -> Callable[[Report], dict[str, Any]]:
+    """A job that reconstructs every guardrail again from the effective labels, with ``params``
+    (saved in ``reconstruction/models.json``)."""
+    label = session.effective_label().copy()
+
+    def work(report: Report) -> dict[str, Any]:
+        report(0.05, "reconstructing")
+        drive = session.drive
+        summary = reconstruct_into(
+            session.run.root,
+            drive.points.xyz,
+            session.run.point_segment,
+            label,
+            drive.trajectory.position,
+            origin=drive.origin,
+            crs=drive.crs,
+            params=params,
+        )
+        session.notify("reconstruction", np.zeros(0, np.int64))
+        return {"summary": summary}
+
+    return work

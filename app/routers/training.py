@@ -1,0 +1,63 @@
+"""Fine-tuning from the labels, background jobs, and the models an operator can activate."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal
+
+from fastapi import APIRouter, Depends, HTTPException
+from pydantic import BaseModel
+
+from app import review_jobs
+from app.dependencies import get_jobs, get_session
+from app.jobs import JobRunner
+from app.model_registry import UnknownModelError
+from app.session import ReviewSession
+
+router = APIRouter(prefix="/api", tags=["training"])
+Session = Annotated[ReviewSession, Depends(get_session)]
+Jobs = Annotated[JobRunner, Depends(get_jobs)]
+
+
+class TrainBody(BaseModel):
+    mode: Literal["fast", "full"] = "fast"
+    include_unreviewed: bool = True
+
+
+@router.post("/train", status_code=202)
+def post_train(session: Session, jobs: Jobs, body: TrainBody | None = None) -> dict[str, Any]:
+    """Start fine-tuning a model from the label store; poll ``/api/jobs/{job}``.
+
+    Segments an operator labelled take the operator's label; with ``include_unreviewed`` the
+    others take the run's corrected label.
+    """
+    body = body or TrainBody()
+    running = jobs.busy("train")
+    if running is not None:
+        raise HTTPException(409, detail=f"a training is already running (job {running.id})")
+    work = review_jobs.fine_tune(
+        session, mode=body.mode, include_unreviewed=body.include_unreviewed
+    )
+    return {"job": jobs.submit("train", work).id}
+
+
+@router.get("/jobs/{job_id}")
+def get_job(jobs: Jobs, job_id: str) -> dict[str, Any]:
+    job = jobs.get(job_id)
+    if job is None:
+        raise HTTPException(404, detail=f"no job {job_id}")
+    return job.to_json()
+
+
+@router.get("/models")
+def get_models(session: Session) -> dict[str, Any]:
+    """Every model known to the app, newest first; ``active`` made the run's predictions."""
+    return {"active": session.models.active_version, "models": session.models.list()}
+
+
+@router.post("/models/{version}/activate")
+def post_activate(session: Session, version: str) -> dict[str, Any]:
+    """Re-predict the run with this model and make it the active one."""
+    try:
+        return review_jobs.activate(session, version)
+    except UnknownModelError as exc:
+        raise HTTPException(404, detail=f"no model folder of version {version} is known") from exc

@@ -1,0 +1,496 @@
+"""The 3D scene of the review app, built with viser.
+
+The scene shows a window of the drive (points within a budget, coloured by label, prediction,
+probability or truth), the trajectory, the cameras, and the reconstructed guardrails. A click
+picks the segment under the cursor (the server finds it from the click ray: viser has no
+per-point picking), a rectangle (shift + drag) picks many. The GUI shows the selection's crop and
+probability, labels it (keys G, O, shift+G / shift+O for the whole connected run, Z to undo, N for
+the next in the review queue), and tunes the reconstruction thresholds live.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from typing import Any
+
+import cv2
+import numpy as np
+import trimesh
+import viser
+import viser.transforms as vtf
+
+from app import review_jobs
+from app.jobs import JobRunner
+from app.scene.colours import COLOUR_MODES, point_colours
+from app.scene.picking import in_rectangle, pick_along_ray, project_to_screen
+from app.scene.tuning import TUNABLE, RunTuner, with_value
+from app.scene.window import window_points
+from app.segment_views import review_queue
+from app.session import ReviewSession
+from guardrail_core.errors import GuardrailError, RunFolderError
+from guardrail_core.extract.track import track_coordinates
+from guardrail_core.reconstruction import RECONSTRUCTION_DIR, ReconstructionParams
+
+#: Mesh colours: the reconstruction, a retuned run, and the ghost of its previous mesh.
+MESH_COLOUR = (230, 230, 235)
+TUNED_COLOUR = (60, 200, 120)
+GHOST_COLOUR = (150, 150, 150)
+GHOST_OPACITY = 0.3
+#: Seconds to wait after the last slider move before re-running (sliders fire on every step).
+DEBOUNCE_S = 0.15
+
+
+class ReviewScene:
+    """The viser scene and GUI of one review session.
+
+    Parameters
+    ----------
+    session : the drive and run under review
+    server : the viser server to build on
+    window_m : metres of trajectory shown at once
+    point_budget : the most points sent to the browser
+    labelling : offer labelling in the 3D GUI (off when the API needs a token: viser's own port
+        has no token check, so labels then change only through the API)
+    jobs : where "apply to the whole drive" runs the reconstruction
+    """
+
+    def __init__(
+        self,
+        session: ReviewSession,
+        server: viser.ViserServer,
+        *,
+        window_m: float = 100.0,
+        point_budget: int = 400_000,
+        labelling: bool = True,
+        jobs: JobRunner | None = None,
+    ) -> None:
+        self.session = session
+        self.jobs = jobs
+        self.server = server
+        self.window_m = float(window_m)
+        self.point_budget = int(point_budget)
+        self.labelling = labelling
+        drive = session.drive
+        track = track_coordinates(drive.points.xyz, drive.points.gps_time, drive.trajectory)
+        self.station = track.station  # (N,) metres along the trajectory
+        self.station_range = (float(self.station.min()), float(self.station.max()))
+        self.start_m = self.station_range[0]
+        self.points = np.zeros(0, np.int64)  # drive points now shown
+        self.mode = "label"
+        self._lock = threading.RLock()
+        self._cloud: viser.PointCloudHandle | None = None
+        self._frusta: list[viser.CameraFrustumHandle] = []
+        self._meshes: dict[int, viser.GlbHandle | viser.MeshHandle] = {}
+        self._last_tuned_mesh: trimesh.Trimesh | None = None
+        self._fly_on_select = True
+        self._tuner: RunTuner | None = None
+        self._tune_timer: threading.Timer | None = None
+        self.last_tune_seconds: float | None = None
+
+        server.scene.set_up_direction("+z")
+        self._build_gui()
+        self.show_window(self.start_m)
+        self._add_trajectory()
+        self.load_meshes()
+        server.scene.on_click()(self._on_click)
+        server.scene.on_rect_select(modifier="shift")(self._on_rect_select)
+        session.subscribe(self._on_session_event)
+
+    # -- the window of points ---------------------------------------------------------------
+
+    def show_window(self, start_m: float) -> float:
+        """Show the points of ``[start_m, start_m + window_m)``; returns the seconds it took."""
+        clock = time.perf_counter()
+        lo, hi = self.station_range
+        start_m = float(np.clip(start_m, lo, max(lo, hi - self.window_m)))
+        with self._lock:
+            self.start_m = start_m
+            self.points = window_points(
+                self.station,
+                self.session.run.point_segment,
+                start_m,
+                self.window_m,
+                self.point_budget,
+            )
+            xyz = self.session.drive.points.xyz[self.points]
+            self._cloud = self.server.scene.add_point_cloud(
+                "/drive/points",
+                points=xyz.astype(np.float32),
+                colors=self._colours(),
+                point_size=0.04,
+                point_shape="circle",
+                precision="float32",
+            )
+        self._add_cameras()
+        self._window_text.content = (
+            f"{start_m:.0f}-{start_m + self.window_m:.0f} m of "
+            f"{hi - lo:.0f} m · {len(self.points):,} points"
+        )
+        return time.perf_counter() - clock
+
+    def _colours(self) -> np.ndarray:
+        session = self.session
+        point_class = None
+        if session.drive.truth is not None:
+            point_class = session.drive.truth.point_class[self.points]
+        selected = np.zeros(session.n_segments, bool)
+        selected[session.selection] = True
+        return point_colours(
+            self.mode,
+            session.run.point_segment[self.points],
+            segment_label=session.effective_label(),
+            raw_label=session.run.segments["raw_label"],
+            probability=session.run.segments["probability"],
+            point_labels=session.point_labels()[self.points],
+            point_class=point_class,
+            selected=selected,
+        )
+
+    def recolour(self) -> float:
+        """Recolour the points shown (after a relabel, a new selection or another mode);
+        returns the seconds it took."""
+        clock = time.perf_counter()
+        with self._lock:
+            if self._cloud is not None:
+                self._cloud.colors = self._colours()
+        return time.perf_counter() - clock
+
+    def _add_trajectory(self) -> None:
+        position = self.session.drive.trajectory.position
+        step = max(1, len(position) // 2000)
+        path = position[::step]
+        segments = np.stack([path[:-1], path[1:]], axis=1)
+        self.server.scene.add_line_segments(
+            "/drive/trajectory",
+            points=segments,
+            colors=(40, 120, 255),
+            thickness=2.0,
+            thickness_units="screen",
+        )
+
+    def _add_cameras(self) -> None:
+        """Frusta of the images taken along the window (the crops' sources)."""
+        drive = self.session.drive
+        for handle in list(self._frusta):
+            handle.remove()
+        self._frusta = []
+        if not drive.images:
+            return
+        times = np.array([image.gps_time for image in drive.images])
+        station = np.interp(
+            times,
+            drive.points.gps_time[:: max(1, len(drive.points) // 5000)],
+            self.station[:: max(1, len(drive.points) // 5000)],
+        )
+        inside = np.flatnonzero(
+            (station >= self.start_m) & (station < self.start_m + self.window_m)
+        )
+        for i in inside:
+            image = drive.images[i]
+            camera = drive.cameras[image.camera]
+            fov = 2 * np.arctan2(camera.height / 2, camera.K[1, 1])
+            T = image.T_world_camera
+            self._frusta.append(
+                self.server.scene.add_camera_frustum(
+                    f"/drive/cameras/{i:05d}",
+                    fov=float(fov),
+                    aspect=camera.width / camera.height,
+                    scale=0.4,
+                    color=(255, 200, 40),
+                    wxyz=vtf.SO3.from_matrix(T[:3, :3]).wxyz,
+                    position=T[:3, 3],
+                )
+            )
+
+    # -- meshes -----------------------------------------------------------------------------
+
+    def load_meshes(self) -> None:
+        """Show every reconstructed run's mesh (from ``reconstruction/meshes``)."""
+        for handle in list(self._meshes.values()):
+            handle.remove()
+        self._meshes = {}
+        try:
+            self._tuner = RunTuner(self.session.run.root)
+        except (RunFolderError, OSError, KeyError):
+            self._tuner = None
+        folder = self.session.run.root / RECONSTRUCTION_DIR / "meshes"
+        for path in sorted(folder.glob("run_*.glb")):
+            run_id = int(path.stem.split("_")[1])
+            self._meshes[run_id] = self.server.scene.add_glb(
+                f"/reconstruction/run_{run_id:03d}", glb_data=path.read_bytes()
+            )
+        self._update_tuning_runs()
+
+    # -- picking ----------------------------------------------------------------------------
+
+    def _labelled_points(self) -> np.ndarray:
+        return self.points[self.session.run.point_segment[self.points] >= 0]
+
+    def _on_click(self, event: viser.SceneClickEvent) -> None:
+        candidates = self._labelled_points()
+        hit = pick_along_ray(
+            self.session.drive.points.xyz[candidates],
+            np.asarray(event.ray_origin),
+            np.asarray(event.ray_direction),
+        )
+        if hit is None:
+            return
+        segment = int(self.session.run.point_segment[candidates[hit]])
+        self.session.select([segment])
+
+    def _on_rect_select(self, event: viser.SceneRectSelectEvent) -> None:
+        camera = event.client.camera
+        T = np.eye(4)
+        T[:3, :3] = vtf.SO3(np.asarray(camera.wxyz)).as_matrix()
+        T[:3, 3] = camera.position
+        candidates = self._labelled_points()
+        uv, in_front = project_to_screen(
+            self.session.drive.points.xyz[candidates], T, camera.fov, camera.aspect
+        )
+        inside = in_rectangle(
+            uv, in_front, np.asarray(event.screen_min), np.asarray(event.screen_max)
+        )
+        segments = np.unique(self.session.run.point_segment[candidates[inside]])
+        if len(segments):
+            self.session.select(segments)
+
+    def fly_to(self, segment: int) -> None:
+        """Move the window and every browser's camera to a segment."""
+        seg = self.session.run.segments
+        target = seg["centroid"][segment]
+        station = float(np.median(self.station[self.session.index.points_of([segment])]))
+        if not self.start_m <= station < self.start_m + self.window_m:
+            self.show_window(station - self.window_m / 2)
+        trajectory = self.session.drive.trajectory.position
+        nearest = trajectory[np.argmin(np.linalg.norm(trajectory - target, axis=1))]
+        eye = nearest + np.array([0.0, 0.0, 3.0])
+        eye = eye + (eye - target) / max(np.linalg.norm(eye - target), 1e-6) * 4.0
+        for client in self.server.get_clients().values():
+            client.camera.position = eye
+            client.camera.look_at = target
+
+    # -- session events ---------------------------------------------------------------------
+
+    def _on_session_event(self, event: str, segments: np.ndarray) -> None:
+        if event == "reconstruction":
+            self.load_meshes()
+            return
+        self.recolour()
+        if event in ("selection", "labels", "predictions"):
+            self._show_selection()
+        if event == "selection" and len(segments) and self._fly_on_select:
+            self.fly_to(int(segments[0]))
+
+    def step(self, direction: int) -> None:
+        """Move the window back (-1) or forward (+1) along the trajectory, overlapping by 20%."""
+        self.show_window(self.start_m + direction * 0.8 * self.window_m)
+
+    # -- GUI --------------------------------------------------------------------------------
+
+    def _build_gui(self) -> None:
+        gui = self.server.gui
+
+        with gui.add_folder("View"):
+            mode = gui.add_dropdown("Colour by", COLOUR_MODES, initial_value="label")
+            self._window_text = gui.add_markdown("")
+            back = gui.add_button("◀ Back", icon=None)
+            forward = gui.add_button("Forward ▶")
+
+        @mode.on_update
+        def _(_: Any) -> None:
+            self.mode = mode.value
+            self.recolour()
+
+        back.on_click(lambda _: self.step(-1))
+        forward.on_click(lambda _: self.step(+1))
+
+        with gui.add_folder("Selection"):
+            self._selection_text = gui.add_markdown("Click a point to select its segment.")
+            self._crop = gui.add_image(np.zeros((8, 8, 3), np.uint8), label="crop", format="jpeg")
+            if self.labelling:
+                guardrail = gui.add_button("Guardrail (G)", color="orange")
+                other = gui.add_button("Other (O)", color="gray")
+                whole = gui.add_button("Whole run: guardrail (shift+G)")
+                undo = gui.add_button("Undo (Z)")
+            queue_next = gui.add_button("Next in queue (N)")
+
+        queue_next.on_click(lambda _: self.next_in_queue())
+        gui.add_command("Next in the review queue", hotkey="N").on_trigger(
+            lambda _: self.next_in_queue()
+        )
+        if self.labelling:
+            guardrail.on_click(lambda _: self.label_selection("guardrail"))
+            other.on_click(lambda _: self.label_selection("other"))
+            whole.on_click(lambda _: self.label_selection("guardrail", expand="component"))
+            undo.on_click(lambda _: self.undo())
+            gui.add_command("Label the selection guardrail", hotkey="G").on_trigger(
+                lambda _: self.label_selection("guardrail")
+            )
+            gui.add_command("Label the selection other", hotkey="O").on_trigger(
+                lambda _: self.label_selection("other")
+            )
+            gui.add_command(
+                "Label the whole run guardrail", hotkey="G", modifier="shift"
+            ).on_trigger(lambda _: self.label_selection("guardrail", expand="component"))
+            gui.add_command("Label the whole run other", hotkey="O", modifier="shift").on_trigger(
+                lambda _: self.label_selection("other", expand="component")
+            )
+            gui.add_command("Undo the last label", hotkey="Z").on_trigger(lambda _: self.undo())
+
+        with gui.add_folder("Reconstruction", expand_by_default=False):
+            self._run_choice = gui.add_dropdown("Guardrail run", ("none",), initial_value="none")
+            self._sliders: dict[tuple[str, str], Any] = {}
+            defaults = ReconstructionParams()
+            for (stage, name), (label, lo, hi, step) in TUNABLE.items():
+                value = getattr(getattr(defaults, stage), name)
+                slider = gui.add_slider(label, min=lo, max=hi, step=step, initial_value=value)
+                slider.on_update(lambda _: self._schedule_tune())
+                self._sliders[(stage, name)] = slider
+            self._histogram = gui.add_uplot(
+                data=(np.zeros(2), np.zeros(2), np.zeros(2)),
+                series=(
+                    {"label": "x (m)"},
+                    {"label": "points per bin", "stroke": "#4e79a7", "fill": "#4e79a733"},
+                    {"label": "threshold", "stroke": "#e15759", "dash": (6.0, 4.0)},
+                ),
+                title="x histogram (vertical pipes)",
+                aspect=2.0,
+            )
+            self._tune_text = gui.add_markdown("")
+            apply = gui.add_button("Apply to the whole drive")
+
+        self._run_choice.on_update(lambda _: self._on_run_chosen())
+        apply.on_click(lambda _: self.apply_tuning())
+
+    def _show_selection(self) -> None:
+        session = self.session
+        if len(session.selection) == 0:
+            self._selection_text.content = "Click a point to select its segment."
+            return
+        s = int(session.selection[0])
+        seg = session.run.segments
+        p = float(seg["probability"][s])
+        label = "guardrail" if session.effective_label()[s] else "other"
+        reviewed = "reviewed" if session.operator_label[s] >= 0 else "model"
+        more = f" (+{len(session.selection) - 1} more)" if len(session.selection) > 1 else ""
+        self._selection_text.content = (
+            f"**Segment {s}**{more}  \n"
+            f"probability {'—' if np.isnan(p) else f'{100 * p:.1f}%'} · "
+            f"raw {'guardrail' if seg['raw_label'][s] else 'other'}  \n"
+            f"label **{label}** ({reviewed}) · {int(seg['n_points'][s])} points"
+        )
+        crop = cv2.imread(str(session.run.crop_path(s)))  # None without a crop
+        self._crop.image = np.zeros((8, 8, 3), np.uint8) if crop is None else crop[:, :, ::-1]
+
+    def label_selection(self, label: str, *, expand: str = "none") -> None:
+        if len(self.session.selection):
+            self.session.relabel(self.session.selection, label, expand=expand)
+
+    def undo(self) -> None:
+        self.session.undo()
+
+    def next_in_queue(self) -> None:
+        rows = review_queue(self.session, 1)
+        if rows:
+            self.session.select([rows[0]["id"]])
+
+    # -- tuning -----------------------------------------------------------------------------
+
+    def _update_tuning_runs(self) -> None:
+        if self._tuner is None or not self._tuner.tunable_runs():
+            self._run_choice.options = ("none",)
+            self._run_choice.value = "none"  # type: ignore[misc]
+            return
+        options = tuple(
+            f"run {r.run_id} ({r.model.type}, {len(r.units)} units)"
+            for r in self._tuner.tunable_runs()
+            if r.model is not None
+        )
+        self._run_choice.options = options
+        self._run_choice.value = options[0]  # type: ignore[misc]
+        params = self._tuner.params
+        for (stage, name), slider in self._sliders.items():
+            slider.value = getattr(getattr(params, stage), name)
+
+    def _chosen_run(self) -> int | None:
+        value = self._run_choice.value
+        return None if value == "none" else int(value.split()[1])
+
+    def _on_run_chosen(self) -> None:
+        self._schedule_tune()
+
+    def _schedule_tune(self) -> None:
+        if self._tune_timer is not None:
+            self._tune_timer.cancel()
+        self._tune_timer = threading.Timer(DEBOUNCE_S, self.retune)
+        self._tune_timer.daemon = True
+        self._tune_timer.start()
+
+    def slider_params(self) -> ReconstructionParams:
+        """The reconstruction parameters with the sliders' values."""
+        tuner = self._tuner
+        params = tuner.params if tuner is not None else ReconstructionParams()
+        for (stage, name), slider in self._sliders.items():
+            params = with_value(params, stage, name, slider.value)
+        return params
+
+    def retune(self) -> float | None:
+        """Re-run the chosen run's unit model with the sliders' values and show its mesh, the
+        previous one ghosted; returns the seconds the re-run took."""
+        run_id = self._chosen_run()
+        if self._tuner is None or run_id is None:
+            return None
+        try:
+            result = self._tuner.retune(run_id, self.slider_params())
+        except (GuardrailError, ValueError) as exc:
+            self._tune_text.content = f"**Not re-run:** {exc}"
+            return None
+        name = f"/reconstruction/run_{run_id:03d}"
+        previous = self._meshes.pop(run_id, None)
+        ghost = getattr(self, "_last_tuned_mesh", None)
+        if previous is not None:
+            previous.remove()
+        if ghost is not None:
+            self.server.scene.add_mesh_simple(
+                f"/reconstruction/ghost_{run_id:03d}",
+                vertices=ghost.vertices.astype(np.float32),
+                faces=ghost.faces.astype(np.uint32),
+                color=GHOST_COLOUR,
+                opacity=GHOST_OPACITY,
+            )
+        mesh: trimesh.Trimesh = result.mesh
+        self._meshes[run_id] = self.server.scene.add_mesh_simple(  # type: ignore[assignment]
+            name,
+            vertices=mesh.vertices.astype(np.float32),
+            faces=mesh.faces.astype(np.uint32),
+            color=TUNED_COLOUR,
+        )
+        self._last_tuned_mesh = mesh
+        histogram = result.unit.histogram
+        if histogram is not None:
+            centres = 0.5 * (histogram.edges[:-1] + histogram.edges[1:])
+            self._histogram.data = (
+                centres,
+                histogram.counts.astype(np.float64),
+                np.full(len(centres), histogram.threshold),
+            )
+        model = result.unit.model
+        what = (
+            f"{len(model.pipes)} pipes: "
+            + ", ".join(f"{p.kind} r{1000 * p.radius:.0f} mm" for p in model.pipes)
+            if model.type == "pipe"
+            else f"beam section of {0 if model.section is None else len(model.section)} points"
+        )
+        self.last_tune_seconds = result.seconds
+        self._tune_text.content = f"run {run_id}: {what} · {1000 * result.seconds:.0f} ms"
+        return result.seconds
+
+    def apply_tuning(self) -> None:
+        """Reconstruct the whole drive with the sliders' values (a background job); the new
+        parameters are saved in ``reconstruction/models.json``."""
+        if self._tuner is None or self.jobs is None:
+            return
+        params = self.slider_params()
+        job = self.jobs.submit("reconstruct", review_jobs.reconstruct(self.session, params))
+        self._tune_text.content = f"reconstructing the drive (job {job.id})…"

@@ -1,0 +1,104 @@
+"""Segments as the API shows them: JSON rows, filters, sort orders and the review queue."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from app.session import ReviewSession
+from guardrail_core.extract.crops import CROP_OK, CROP_STATUS_NAMES
+
+SORTS = ("id", "uncertainty", "probability", "-probability")
+
+
+def _name(flag: bool) -> str:
+    return "guardrail" if flag else "other"
+
+
+def uncertainty(probability: np.ndarray) -> np.ndarray:
+    """(S,) 1 at p = 0.5, 0 at p = 0 or 1; segments without a probability count as 1."""
+    p = np.asarray(probability, np.float64)
+    return np.where(np.isnan(p), 1.0, 1.0 - np.abs(2.0 * p - 1.0))
+
+
+def segment_rows(session: ReviewSession, ids: np.ndarray) -> list[dict[str, Any]]:
+    """The API's segment objects (see the REST contract in the README)."""
+    seg = session.run.segments
+    label = session.effective_label()
+    rows = []
+    for s in np.asarray(ids, np.int64):
+        s = int(s)
+        probability = float(seg["probability"][s])
+        ok = int(seg["crop_status"][s]) == CROP_OK
+        rows.append(
+            {
+                "id": s,
+                "n_points": int(seg["n_points"][s]),
+                "centroid": [round(float(v), 3) for v in seg["centroid"][s]],
+                "slice_index": int(seg["slice_index"][s]),
+                "component": int(seg["component"][s]),
+                "crop_status": CROP_STATUS_NAMES[int(seg["crop_status"][s])],
+                "crop_url": f"/api/segments/{s}/crop.jpg" if ok else None,
+                "probability": None if math.isnan(probability) else round(probability, 4),
+                "raw_label": _name(bool(seg["raw_label"][s])),
+                "model_label": _name(bool(seg["label"][s])),
+                "label": _name(bool(label[s])),
+                "reviewed": bool(session.operator_label[s] >= 0),
+                "truth": None if session.truth is None else _name(bool(session.truth[s])),
+            }
+        )
+    return rows
+
+
+def filter_segments(
+    session: ReviewSession,
+    *,
+    label: str | None = None,
+    reviewed: bool | None = None,
+    crop: bool | None = None,
+    min_probability: float | None = None,
+    max_probability: float | None = None,
+    sort: str = "id",
+) -> np.ndarray:
+    """(K,) int64 ids of the segments that pass the filters, in the asked order."""
+    seg = session.run.segments
+    keep = np.ones(session.n_segments, bool)
+    if label is not None:
+        keep &= session.effective_label() == (label == "guardrail")
+    if reviewed is not None:
+        keep &= (session.operator_label >= 0) == reviewed
+    if crop is not None:
+        keep &= (seg["crop_status"] == CROP_OK) == crop
+    p = seg["probability"].astype(np.float64)
+    if min_probability is not None:
+        keep &= np.nan_to_num(p, nan=-1.0) >= min_probability
+    if max_probability is not None:
+        keep &= np.nan_to_num(p, nan=2.0) <= max_probability
+    ids = np.flatnonzero(keep)
+    if sort == "uncertainty":
+        ids = ids[np.argsort(-uncertainty(p[ids]), kind="stable")]
+    elif sort == "probability":
+        ids = ids[np.argsort(np.nan_to_num(p[ids], nan=-1.0), kind="stable")]
+    elif sort == "-probability":
+        ids = ids[np.argsort(-np.nan_to_num(p[ids], nan=-1.0), kind="stable")]
+    return ids.astype(np.int64)
+
+
+def review_queue(session: ReviewSession, limit: int) -> list[dict[str, Any]]:
+    """Unreviewed segments most worth an operator's look, best first.
+
+    A segment whose raw prediction and corrected label disagree (§3.3's correction changed it)
+    comes first; then the model's uncertainty orders them (1 at p = 0.5).
+    """
+    seg = session.run.segments
+    disagrees = seg["raw_label"] != seg["label"]
+    score = uncertainty(seg["probability"]) + disagrees.astype(np.float64)
+    candidates = np.flatnonzero(session.operator_label < 0)
+    order = candidates[np.argsort(-score[candidates], kind="stable")][:limit]
+    rows = segment_rows(session, order)
+    for row, s in zip(rows, order, strict=True):
+        row["reason"] = "disagrees" if disagrees[s] else "uncertain"
+        row["score"] = round(float(score[s]), 4)
+    return rows

@@ -1,0 +1,111 @@
+"""``guardrail serve``: the review app (FastAPI) and its 3D scene (viser) in one process."""
+
+from __future__ import annotations
+
+import secrets
+from pathlib import Path
+
+import uvicorn
+import viser
+
+from app.auth import is_loopback
+from app.jobs import JobRunner
+from app.main import create_app
+from app.scene.viewer import ReviewScene
+from app.session import ReviewSession
+from guardrail_core.errors import InvalidOptionError, RunFolderError
+
+
+def default_run(drive: Path) -> Path:
+    """The run folder beside the drive that ``guardrail demo`` writes (``DRIVE/../run``).
+
+    Raises
+    ------
+    RunFolderError
+        There is none: the caller must name the run folder.
+    """
+    candidate = Path(drive).resolve().parent / "run"
+    if not (candidate / "run.json").is_file():
+        raise RunFolderError(
+            f"no run folder given and none at {candidate}; process the drive with "
+            "`guardrail process DRIVE --model MODEL --out RUN` and pass --run RUN"
+        )
+    return candidate
+
+
+def new_token() -> str:
+    return secrets.token_urlsafe(18)
+
+
+def serve(
+    drive: Path,
+    run: Path | None = None,
+    *,
+    host: str = "127.0.0.1",
+    port: int = 8000,
+    scene_port: int | None = None,
+    token: str | None = None,
+    operator: str = "operator",
+    model_dir: Path | None = None,
+    review_dir: Path | None = None,
+    window_m: float = 100.0,
+    point_budget: int = 400_000,
+) -> None:
+    """Serve the review app until interrupted.
+
+    Parameters
+    ----------
+    drive, run : the drive folder and its run folder (default: ``DRIVE/../run``)
+    host : the address both servers bind to; beyond the loopback a token is required
+    port : the app's port; the 3D scene takes ``scene_port`` (default ``port + 1``)
+    token : every API call must carry it (``Authorization: Bearer`` or ``?token=``)
+    operator : the name recorded with labels made in the 3D scene
+    model_dir : the model folder that made the run, so it can be activated again
+    review_dir : where labels and fine-tuned models are kept (default ``DRIVE/review``)
+    window_m, point_budget : the 3D scene's window along the trajectory and its point budget
+
+    Raises
+    ------
+    InvalidOptionError
+        A host beyond the loopback without a token.
+    """
+    if not is_loopback(host) and not token:
+        raise InvalidOptionError(
+            f"--host {host} serves beyond this machine: give --token (any secret string) so that "
+            "only those who have it can change labels"
+        )
+    run = run or default_run(drive)
+    scene_port = scene_port or port + 1
+    print(f"loading {drive} and {run} …", flush=True)
+    session = ReviewSession(
+        drive, run, review_dir=review_dir, operator=operator, model_dir=model_dir
+    )
+    jobs = JobRunner()
+    server = viser.ViserServer(host=host, port=scene_port, verbose=False)
+    server.gui.configure_theme(control_width="large", show_share_button=False)
+    ReviewScene(
+        session,
+        server,
+        window_m=window_m,
+        point_budget=point_budget,
+        labelling=token is None,
+        jobs=jobs,
+    )
+    app = create_app(
+        session,
+        token=token,
+        jobs=jobs,
+        scene_port=scene_port,
+        scene_clients=lambda: len(server.get_clients()),
+    )
+    shown = "127.0.0.1" if host in ("0.0.0.0", "::") else host
+    query = f"?token={token}" if token else ""
+    print(f"review app: http://{shown}:{port}/{query}", flush=True)
+    print(f"3D scene:   http://{shown}:{scene_port}", flush=True)
+    print(f"labels:     {session.store.path}", flush=True)
+    try:
+        uvicorn.run(app, host=host, port=port, log_level="warning")
+    finally:
+        jobs.shutdown()
+        server.stop()
+        session.close()

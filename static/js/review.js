@@ -1,0 +1,600 @@
+// The review page: a 3D scene (viser, in an iframe) on the left, the selected
+// segment, the label buttons, the review queue and the model box on the right.
+//
+// The selection lives on the server: a click in the 3D scene changes it there,
+// so we poll GET /api/selection; when this page selects something (queue, `n`,
+// ?segment=ID) it PUTs /api/selection, which also moves the 3D camera.
+
+import * as api from "./api.js";
+import { int, pct, plural, toast } from "./api.js";
+
+const SELECTION_POLL_MS = 700;
+const JOB_POLL_MS = 500;
+const QUEUE_LIMIT = 10;
+const HISTORY_SHOWN = 5;
+
+const $ = (id) => document.getElementById(id);
+
+const state = {
+  info: null,
+  selection: [], // segment ids, as the server has them
+  detail: null, // GET /api/segments/{selection[0]}
+  queue: [],
+  // Bumped on every selection change made by this page: a poll that started
+  // before it may carry the old selection and must be dropped.
+  selectionSeq: 0,
+  detailSeq: 0,
+  pollBusy: false,
+  job: null, // {id, result} of the last fine-tuning job
+  lastRefresh: 0,
+};
+
+// Actions (label, undo, next, train, activate) run one after the other.
+const run = api.serializer((err) => {
+  console.error(err);
+  toast(err.message || String(err), "error");
+});
+
+// ---- banner (connection / auth problems) -------------------------------
+
+function setBanner(message) {
+  const el = $("banner");
+  el.textContent = message || "";
+  el.hidden = !message;
+}
+
+function explain(err) {
+  if (err.status === 401 || err.status === 403) {
+    return api.token
+      ? `The server refused the token: ${err.message}`
+      : `This server needs a token: open the page as index.html?token=… (${err.message})`;
+  }
+  return err.message;
+}
+
+// ---- info, header, model box --------------------------------------------
+
+async function loadInfo() {
+  const info = await api.get("/api/info");
+  state.info = info;
+  renderInfo();
+  return info;
+}
+
+// The server may hand out a scene URL on localhost; an operator on another
+// machine needs the host they reached this page by, on the scene's port.
+function sceneSrc(url) {
+  if (!url) return "about:blank";
+  try {
+    const u = new URL(url, window.location.href);
+    const local = ["localhost", "127.0.0.1", "0.0.0.0", "[::1]"];
+    if (local.includes(u.hostname) && !local.includes(window.location.hostname)) {
+      u.hostname = window.location.hostname;
+    }
+    return u.href;
+  } catch {
+    return url;
+  }
+}
+
+function renderInfo() {
+  const info = state.info;
+  if (!info) return;
+  $("drive-name").textContent = info.drive ?? "—";
+  $("run-name").textContent = info.run ?? "—";
+  const model = info.model || {};
+  $("header-model").textContent = model.version ?? "—";
+  if (info.operator) {
+    $("operator").textContent = info.operator;
+    $("operator-wrap").hidden = false;
+  }
+  document.title = `Guardrail review — ${info.run ?? ""}`;
+
+  // Set the iframe once: reloading it would reset the 3D view.
+  const scene = $("scene");
+  const src = sceneSrc(info.scene_url);
+  if (!info.scene_url && !scene.srcdoc) {
+    scene.srcdoc = '<p style="color:#aaa;font:14px system-ui,sans-serif;padding:16px">'
+      + "This server has no 3D scene: the panel on the right still works.</p>";
+  } else if (info.scene_url && scene.dataset.src !== src) {
+    scene.removeAttribute("srcdoc");
+    scene.dataset.src = src;
+    scene.src = src;
+  }
+
+  $("model-version").textContent = model.version ?? "—";
+  $("model-mode").textContent = model.mode ?? "—";
+  const heldOut = (model.metrics && model.metrics.held_out) || {};
+  $("model-f1-guardrail").textContent = pct(heldOut.guardrail?.f1);
+  $("model-f1-other").textContent = pct(heldOut.other?.f1);
+
+  const counts = info.label_counts || {};
+  const parts = Object.entries(counts).map(([k, v]) => `${k} ${typeof v === "number" ? int(v) : v}`);
+  $("label-counts").textContent = parts.length
+    ? `${parts.join(" · ")} — of ${int(info.n_segments)} segments`
+    : `${int(info.n_segments)} segments, ${int(info.n_points)} points`;
+}
+
+// ---- selection ----------------------------------------------------------
+
+const sameIds = (a, b) => a.length === b.length && a.every((x, i) => x === b[i]);
+
+async function pollSelection() {
+  if (document.hidden || state.pollBusy) return;
+  state.pollBusy = true;
+  const seq = state.selectionSeq;
+  try {
+    const sel = await api.get("/api/selection");
+    if (!$("banner").dataset.sticky) setBanner(null);
+    if (!state.info) loadInfo().catch(() => {});
+    if (seq !== state.selectionSeq) return; // this page changed it meanwhile
+    const ids = (sel && sel.segments) || [];
+    if (!sameIds(ids, state.selection)) {
+      state.selection = ids;
+      renderQueue(); // highlight
+      await loadDetail();
+    }
+  } catch (err) {
+    setBanner(`Lost contact with the server: ${explain(err)}`);
+  } finally {
+    state.pollBusy = false;
+  }
+}
+
+/** Select `ids` from this page: the server moves the 3D camera to them. */
+async function selectSegments(ids) {
+  state.selectionSeq += 1;
+  state.selection = ids;
+  renderQueue();
+  const detailPromise = loadDetail();
+  const sel = await api.put("/api/selection", { segments: ids });
+  state.selectionSeq += 1; // polls started during the PUT are stale too
+  const serverIds = (sel && sel.segments) || ids;
+  if (!sameIds(serverIds, state.selection)) {
+    state.selection = serverIds;
+    renderQueue();
+    await loadDetail();
+  } else {
+    await detailPromise;
+  }
+}
+
+async function loadDetail() {
+  const seq = ++state.detailSeq;
+  const id = state.selection[0];
+  if (id === undefined) {
+    state.detail = null;
+    renderDetail();
+    return;
+  }
+  try {
+    const detail = await api.get(`/api/segments/${id}`);
+    if (seq !== state.detailSeq) return; // a newer selection won
+    state.detail = detail;
+  } catch (err) {
+    if (seq !== state.detailSeq) return;
+    state.detail = null;
+    toast(`segment ${id}: ${err.message}`, "error");
+  }
+  renderDetail();
+}
+
+function setLabelChip(el, label) {
+  el.textContent = label ?? "—";
+  el.dataset.label = label ?? "";
+  el.className = `label-chip${label ? ` label-${label}` : ""}`;
+}
+
+const CROP_STATUS_TEXT = {
+  ok: "ok",
+  no_image: "no camera image holds all its points",
+  too_small: "too few points for a crop",
+};
+
+function renderDetail() {
+  const d = state.detail;
+  const n = state.selection.length;
+  $("selection-count").textContent = n > 1 ? `(${n} selected, showing the first)` : "";
+  $("selection-empty").hidden = n > 0;
+  $("selection-detail").hidden = n === 0;
+  if (n === 0) return;
+
+  $("selected-id").textContent = d ? String(d.id) : String(state.selection[0]);
+  if (!d) return;
+
+  const img = $("selected-crop");
+  const missing = $("selected-crop-missing");
+  if (d.crop_url) {
+    const src = api.imageUrl(d.crop_url);
+    if (img.getAttribute("src") !== src) img.src = src;
+    img.hidden = false;
+    missing.hidden = true;
+  } else {
+    img.hidden = true;
+    img.removeAttribute("src");
+    missing.textContent = d.crop_status === "too_small" ? "too small" : "no crop";
+    missing.hidden = false;
+  }
+
+  setLabelChip($("selected-label"), d.label);
+  $("selected-reviewed").textContent = d.reviewed ? "✓ reviewed" : "not yet";
+  $("selected-reviewed").dataset.reviewed = String(Boolean(d.reviewed));
+  $("selected-points").textContent = int(d.n_points);
+
+  const p = typeof d.probability === "number" ? d.probability : null;
+  $("selected-probability").textContent = pct(p);
+  const bar = $("selected-probability-bar");
+  bar.style.width = p === null ? "0" : `${Math.max(0, Math.min(1, p)) * 100}%`;
+  bar.className = p !== null && p >= 0.5 ? "fill-guardrail" : "fill-other";
+
+  $("selected-raw").textContent = d.raw_label ?? "—";
+  $("selected-model-label").textContent = d.model_label ?? "—";
+  const hasTruth = d.truth !== null && d.truth !== undefined;
+  $("selected-truth-term").hidden = !hasTruth;
+  $("selected-truth").hidden = !hasTruth;
+  if (hasTruth) {
+    $("selected-truth").textContent = d.truth === d.label ? `${d.truth} ✓` : `${d.truth} ✗ (label differs)`;
+  }
+  $("selected-place").textContent = `${d.slice_index ?? "—"} / ${d.component ?? "—"}`;
+  $("selected-crop-status").textContent = CROP_STATUS_TEXT[d.crop_status] ?? d.crop_status ?? "—";
+
+  renderHistory(d.history || []);
+}
+
+function renderHistory(history) {
+  const list = $("history");
+  list.replaceChildren();
+  if (!history.length) {
+    const li = document.createElement("li");
+    li.className = "muted";
+    li.textContent = "no changes yet";
+    list.append(li);
+    return;
+  }
+  // The server sends the history newest first.
+  for (const h of history.slice(0, HISTORY_SHOWN)) {
+    const li = document.createElement("li");
+    li.classList.toggle("undone", Boolean(h.undone));
+    const who = h.who ? ` ${h.who}` : "";
+    const what = h.old === h.new ? `${h.new}` : `${h.old ?? "—"} → ${h.new ?? "—"}`;
+    const extra = [h.kind, h.n_points !== undefined && h.n_points !== null ? `${int(h.n_points)} pts` : null,
+      h.model_version ? `model ${h.model_version}` : null, h.batch !== undefined ? `batch ${h.batch}` : null]
+      .filter(Boolean).join(", ");
+    li.textContent = `${api.formatTime(h.at)}${who}: ${what}${extra ? ` (${extra})` : ""}${h.undone ? " — undone" : ""}`;
+    list.append(li);
+  }
+}
+
+// ---- queue --------------------------------------------------------------
+
+async function loadQueue() {
+  const res = await api.get(`/api/queue${api.query({ limit: QUEUE_LIMIT })}`);
+  state.queue = (res && res.items) || [];
+  renderQueue();
+}
+
+function renderQueue() {
+  const list = $("queue");
+  list.replaceChildren();
+  $("queue-empty").hidden = state.queue.length > 0;
+  for (const item of state.queue) {
+    const li = document.createElement("li");
+    li.dataset.id = String(item.id);
+    li.tabIndex = 0;
+    li.title = `select segment ${item.id}`;
+    li.classList.toggle("current", state.selection.includes(item.id));
+
+    if (item.crop_url) {
+      const img = document.createElement("img");
+      img.src = api.imageUrl(item.crop_url);
+      img.width = 28;
+      img.height = 28;
+      img.loading = "lazy";
+      img.alt = "";
+      li.append(img);
+    } else {
+      const ph = document.createElement("span");
+      ph.className = "thumb-missing";
+      li.append(ph);
+    }
+    const id = document.createElement("span");
+    id.className = "q-id";
+    id.textContent = `#${item.id}`;
+    const label = document.createElement("span");
+    setLabelChip(label, item.label);
+    const prob = document.createElement("span");
+    prob.className = "q-prob";
+    prob.textContent = pct(item.probability, 0);
+    const reason = document.createElement("span");
+    reason.className = `reason reason-${item.reason}`;
+    reason.dataset.reason = item.reason ?? "";
+    reason.textContent = item.reason ?? "";
+    li.append(id, label, prob, reason);
+    list.append(li);
+  }
+}
+
+function onQueueClick(event) {
+  const li = event.target.closest("#queue li[data-id]");
+  if (!li) return;
+  const id = Number(li.dataset.id);
+  run(() => selectSegments([id]));
+}
+
+async function nextInQueue() {
+  if (!state.queue.length) await loadQueue();
+  if (!state.queue.length) {
+    toast("nothing left in the review queue");
+    return;
+  }
+  const current = state.selection[0];
+  const at = state.queue.findIndex((q) => q.id === current);
+  const item = at < 0 ? state.queue[0] : state.queue[at + 1];
+  if (!item) {
+    toast("end of the review queue: label this one, the queue refills");
+    return;
+  }
+  await selectSegments([item.id]);
+  toast(`segment ${item.id}: ${item.reason ?? "queued"}, ${pct(item.probability, 0)}`);
+}
+
+// ---- labelling ------------------------------------------------------------
+
+async function labelSelection(label, expand) {
+  const ids = [...state.selection];
+  if (!ids.length) {
+    toast("nothing selected: click a segment in the 3D view or press n", "error");
+    return;
+  }
+  const res = await api.post("/api/labels/batch", { segments: ids, label, expand });
+  const n = (res.segments || []).length;
+  const scope = expand === "component" ? " (whole run)" : "";
+  toast(`${plural(n, "segment")} -> ${label}${scope} (${int(res.changed_points)} points)`);
+  await afterChange();
+}
+
+async function undo() {
+  const res = await api.post("/api/labels/undo");
+  if (res.undone_batch === null || res.undone_batch === undefined) {
+    toast("nothing to undo");
+    return;
+  }
+  toast(`undid batch ${res.undone_batch}: ${plural((res.segments || []).length, "segment")} (${int(res.changed_points)} points)`);
+  await afterChange();
+}
+
+// After anything that changes labels: refresh what shows them.
+async function afterChange() {
+  await Promise.all([loadDetail(), loadQueue(), loadInfo()]);
+}
+
+// ---- fine-tuning ---------------------------------------------------------
+
+async function startTraining() {
+  $("train").disabled = true;
+  $("compare").hidden = true;
+  $("train-status").hidden = false;
+  $("train-progress").value = 0;
+  $("train-message").textContent = "starting…";
+  try {
+    const res = await api.post("/api/train", { mode: "fast" });
+    state.job = { id: res.job, result: null };
+    pollJob(res.job, 0);
+  } catch (err) {
+    $("train").disabled = false;
+    $("train-message").textContent = `could not start: ${err.message}`;
+    throw err;
+  }
+}
+
+function pollJob(jobId, failures) {
+  setTimeout(async () => {
+    let job;
+    try {
+      job = await api.get(`/api/jobs/${encodeURIComponent(jobId)}`);
+    } catch (err) {
+      // A few hiccups are fine; a job that vanished is not.
+      if (failures >= 5 || err.status === 404) {
+        $("train").disabled = false;
+        $("train-message").textContent = `lost the job: ${err.message}`;
+        return;
+      }
+      pollJob(jobId, failures + 1);
+      return;
+    }
+    renderJob(job);
+    if (job.status === "done" || job.status === "failed") {
+      $("train").disabled = false;
+      if (job.status === "done") showComparison(job.result);
+      else toast(`fine-tuning failed: ${job.error ?? "unknown error"}`, "error");
+      return;
+    }
+    pollJob(jobId, 0);
+  }, JOB_POLL_MS);
+}
+
+function renderJob(job) {
+  const progress = $("train-progress");
+  progress.value = typeof job.progress === "number" ? job.progress : 0;
+  progress.dataset.status = job.status;
+  let text = `${job.status}${typeof job.progress === "number" ? ` ${pct(job.progress, 0)}` : ""}`;
+  if (job.message) text += ` — ${job.message}`;
+  if (job.status === "failed") text = `failed: ${job.error ?? job.message ?? "unknown error"}`;
+  $("train-message").textContent = text;
+}
+
+const COMPARE_ROWS = [
+  ["guardrail F1", (m) => m?.guardrail?.f1, "pct"],
+  ["other F1", (m) => m?.other?.f1, "pct"],
+  ["accuracy", (m) => m?.accuracy, "pct"],
+  ["n held out", (m) => m?.n_held_out, "int"],
+];
+
+const isNum = (x) => typeof x === "number" && Number.isFinite(x);
+
+function showComparison(result) {
+  state.job.result = result;
+  const box = $("compare");
+  if (!result || !result.version) {
+    $("train-message").textContent = "done, but no new model came back";
+    return;
+  }
+  $("compare-new-version").textContent = result.version;
+  $("compare-current-version").textContent = state.info?.model?.version ?? "";
+  const body = box.querySelector("tbody");
+  body.replaceChildren();
+  for (const [name, pick, kind] of COMPARE_ROWS) {
+    const a = pick(result.metrics_new);
+    const b = pick(result.metrics_current);
+    const tr = document.createElement("tr");
+    const fmt = kind === "pct" ? (x) => pct(x) : int;
+    let change = "";
+    let cls = "";
+    if (isNum(a) && isNum(b)) {
+      const diff = kind === "pct" ? (a - b) * 100 : a - b;
+      change = kind === "pct" ? `${diff >= 0 ? "+" : ""}${diff.toFixed(1)} pt` : (diff ? `${diff > 0 ? "+" : ""}${diff}` : "");
+      if (kind === "pct" && Math.abs(diff) >= 0.05) cls = diff > 0 ? "better" : "worse";
+    }
+    for (const [text, c] of [[name, ""], [fmt(a), ""], [fmt(b), ""], [change, cls]]) {
+      const td = document.createElement(text === name ? "th" : "td");
+      td.textContent = text;
+      if (c) td.className = c;
+      tr.append(td);
+    }
+    body.append(tr);
+  }
+  $("activate").disabled = false;
+  box.hidden = false;
+  box.scrollIntoView({ block: "nearest" });
+}
+
+async function activateNew() {
+  const version = state.job?.result?.version;
+  if (!version) return;
+  $("activate").disabled = true;
+  try {
+    const res = await api.post(`/api/models/${encodeURIComponent(version)}/activate`);
+    toast(`model ${res.active} active: ${plural(res.changed_segments, "segment")} changed label`);
+    $("compare").hidden = true;
+    $("train-status").hidden = true;
+    await afterChange();
+  } finally {
+    $("activate").disabled = false;
+  }
+}
+
+function keepCurrent() {
+  $("compare").hidden = true;
+  $("train-status").hidden = true;
+  toast(`kept model ${state.info?.model?.version ?? ""}`);
+}
+
+// ---- help overlay, focus hint, keyboard ---------------------------------
+
+function setHelp(open) {
+  $("help").hidden = !open;
+  if (open) $("help-close").focus();
+}
+
+function onKeyDown(event) {
+  if (event.ctrlKey || event.metaKey || event.altKey || api.isTyping(event)) return;
+  if (event.key === "Escape") {
+    setHelp(false);
+    return;
+  }
+  if (event.key === "?") {
+    event.preventDefault();
+    setHelp($("help").hidden);
+    return;
+  }
+  if (event.repeat) return; // a held key must not fire a burst of requests
+  switch (event.key.toLowerCase()) {
+    case "g":
+      run(() => labelSelection("guardrail", event.shiftKey ? "component" : "none"));
+      break;
+    case "o":
+      run(() => labelSelection("other", event.shiftKey ? "component" : "none"));
+      break;
+    case "z":
+    case "u":
+      run(undo);
+      break;
+    case "n":
+      run(nextInQueue);
+      break;
+    default:
+      return;
+  }
+  event.preventDefault();
+}
+
+// Keys typed while the 3D iframe has focus never reach this document, so say
+// so whenever our window loses focus.
+function setFocusHint(show) {
+  $("focus-hint").hidden = !show;
+}
+
+// Refresh what another tab (the gallery) may have changed, at most every 2 s.
+function refreshOnReturn() {
+  const now = Date.now();
+  if (now - state.lastRefresh < 2000) return;
+  state.lastRefresh = now;
+  Promise.all([loadDetail(), loadQueue(), loadInfo()]).catch(() => {});
+}
+
+// ---- start --------------------------------------------------------------
+
+async function init() {
+  api.keepTokenInLinks();
+  document.addEventListener("keydown", onKeyDown);
+  window.addEventListener("blur", () => setFocusHint(true));
+  window.addEventListener("focus", () => {
+    setFocusHint(false);
+    refreshOnReturn();
+  });
+  $("focus-hint").addEventListener("click", () => {
+    window.focus();
+    setFocusHint(false);
+  });
+  setFocusHint(!document.hasFocus());
+
+  $("help-button").addEventListener("click", () => setHelp(true));
+  $("help-close").addEventListener("click", () => setHelp(false));
+  $("help").addEventListener("click", (e) => {
+    if (e.target === $("help")) setHelp(false);
+  });
+
+  for (const button of document.querySelectorAll("#actions-panel button[data-label]")) {
+    button.addEventListener("click", () =>
+      run(() => labelSelection(button.dataset.label, button.dataset.expand)));
+  }
+  $("undo").addEventListener("click", () => run(undo));
+  $("next").addEventListener("click", () => run(nextInQueue));
+  $("queue").addEventListener("click", onQueueClick);
+  $("queue").addEventListener("keydown", (e) => {
+    if (e.key === "Enter") onQueueClick(e);
+  });
+  $("train").addEventListener("click", () => run(startTraining));
+  $("activate").addEventListener("click", () => run(activateNew));
+  $("keep").addEventListener("click", keepCurrent);
+
+  try {
+    await loadInfo();
+  } catch (err) {
+    setBanner(explain(err));
+    $("banner").dataset.sticky = err.status === 401 || err.status === 403 ? "1" : "";
+    if ($("banner").dataset.sticky) return; // nothing else will work either
+  }
+  loadQueue().catch((err) => toast(`queue: ${err.message}`, "error"));
+
+  const wanted = new URLSearchParams(window.location.search).get("segment");
+  if (wanted !== null && /^\d+$/.test(wanted)) {
+    await run(() => selectSegments([Number(wanted)]));
+  } else {
+    await pollSelection();
+  }
+  renderDetail();
+  setInterval(pollSelection, SELECTION_POLL_MS);
+}
+
+init();

@@ -1,0 +1,23 @@
+"""A review session on a copy of the test run (the app writes into the run when a model is
+activated, and into its review folder whenever a label changes)."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+from app.session import ReviewSession
+
+
+def copy_run(run_path: Path, tmp_path: Path) -> Path:
+    out = tmp_path / "run"
+    shutil.copytree(run_path, out)
+    return out
+
+
+def new_session(
+    drive_path: Path, run: Path, review: Path, model_path: Path | None = None
+) -> ReviewSession:
+    return ReviewSession(
+        drive_path, run, review_dir=review, operator="tester", model_dir=model_path
+    )

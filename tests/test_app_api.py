@@ -1,0 +1,254 @@
+"""The review app's REST API, through FastAPI's TestClient, on the test drive's run."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+
+from app.jobs import JobRunner
+from app.main import create_app
+from app.session import ReviewSession
+from guardrail_core.errors import InvalidOptionError
+from guardrail_core.run_folder import load_run
+from tests.app_fixtures import copy_run, new_session
+
+
+@pytest.fixture()
+def session(drive_path: Path, run_path: Path, model_path: Path, tmp_path: Path):
+    s = new_session(drive_path, copy_run(run_path, tmp_path), tmp_path / "review", model_path)
+    yield s
+    s.close()
+
+
+@pytest.fixture()
+def client(session: ReviewSession) -> Iterator[TestClient]:
+    jobs = JobRunner()
+    with TestClient(create_app(session, jobs=jobs)) as c:
+        c.jobs = jobs  # type: ignore[attr-defined]
+        yield c
+    jobs.shutdown()
+
+
+def _segment_with_crop(session: ReviewSession) -> int:
+    return int(np.flatnonzero(session.run.segments["crop_status"] == 0)[0])
+
+
+def test_info_describes_the_run(client: TestClient, session: ReviewSession) -> None:
+    info = client.get("/api/info").json()
+    assert info["n_segments"] == len(session.run)
+    assert info["n_points"] == len(session.drive.points)
+    assert info["model"]["version"] == session.run.info["model"]["version"]
+    assert info["token_required"] is False
+
+
+def test_segments_are_paged_filtered_and_sorted(client: TestClient, session: ReviewSession):
+    everything = client.get("/api/segments", params={"limit": 1000}).json()
+    assert everything["total"] == len(session.run)
+    assert [row["id"] for row in everything["items"]] == list(range(min(1000, len(session.run))))
+    page = client.get("/api/segments", params={"offset": 5, "limit": 3}).json()
+    assert [row["id"] for row in page["items"]] == [5, 6, 7]
+
+    guardrail = client.get("/api/segments", params={"label": "guardrail", "limit": 1000}).json()
+    assert guardrail["total"] == int(session.run.segments["label"].sum())
+    assert all(row["label"] == "guardrail" for row in guardrail["items"])
+
+    by_p = client.get(
+        "/api/segments", params={"sort": "-probability", "crop": True, "limit": 1000}
+    ).json()["items"]
+    probabilities = [row["probability"] for row in by_p]
+    assert probabilities == sorted(probabilities, reverse=True)
+    assert all(row["crop_url"] for row in by_p)
+
+    uncertain = client.get("/api/segments", params={"sort": "uncertainty", "crop": True}).json()
+    u = [1 - abs(2 * row["probability"] - 1) for row in uncertain["items"]]
+    assert u == sorted(u, reverse=True)
+
+
+def test_bad_requests_get_404_and_422(client: TestClient, session: ReviewSession) -> None:
+    n = len(session.run)
+    assert client.get(f"/api/segments/{n}").status_code == 404
+    assert client.get("/api/segments/-1").status_code == 404
+    assert client.get("/api/segments/abc").status_code == 422
+    assert client.put("/api/segments/0/label", json={"label": "tree"}).status_code == 422
+    assert client.put(f"/api/segments/{n}/label", json={"label": "other"}).status_code == 404
+    batch = {"segments": [0, n + 5], "label": "other"}
+    assert client.post("/api/labels/batch", json=batch).status_code == 404
+    assert (
+        client.post("/api/labels/batch", json={"segments": [], "label": "other"}).status_code == 422
+    )
+    assert client.get("/api/segments", params={"sort": "colour"}).status_code == 422
+    assert client.put("/api/selection", json={"segments": [n]}).status_code == 404
+    # Nothing of that reached the store.
+    assert session.store.counts()["labelled_points"] == 0
+
+
+def test_relabel_a_segment_then_undo(client: TestClient, session: ReviewSession) -> None:
+    s = _segment_with_crop(session)
+    before = client.get(f"/api/segments/{s}").json()
+    flipped = "other" if before["label"] == "guardrail" else "guardrail"
+    answer = client.put(f"/api/segments/{s}/label", json={"label": flipped}).json()
+    assert answer["changed_points"] == before["n_points"]
+    assert [row["id"] for row in answer["segments"]] == [s]
+    after = client.get(f"/api/segments/{s}").json()
+    assert after["label"] == flipped and after["reviewed"] is True
+    assert after["model_label"] == before["model_label"]  # the model's label is kept apart
+    assert after["history"][0]["new"] == flipped and after["history"][0]["who"] == "tester"
+
+    undone = client.post("/api/labels/undo").json()
+    assert undone["undone_batch"] == answer["batch"]
+    again = client.get(f"/api/segments/{s}").json()
+    assert again["label"] == before["label"] and again["reviewed"] is False
+    assert client.post("/api/labels/undo").json()["batch"] is None  # nothing left to undo
+
+
+def test_a_whole_connected_run_is_relabelled_at_once(client: TestClient, session: ReviewSession):
+    component = session.run.segments["component"]
+    sizes = np.bincount(component)
+    s = int(np.flatnonzero(sizes[component] == sizes.max())[0])
+    members = set(np.flatnonzero(component == component[s]).tolist())
+    answer = client.post(
+        "/api/labels/batch", json={"segments": [s], "label": "other", "expand": "component"}
+    ).json()
+    assert {row["id"] for row in answer["segments"]} == members
+    assert all(row["label"] == "other" and row["reviewed"] for row in answer["segments"])
+    n_points = int(session.run.segments["n_points"][list(members)].sum())
+    assert session.store.counts()["labelled_points"] == n_points
+
+
+def test_labels_survive_a_restart(
+    drive_path: Path, run_path: Path, tmp_path: Path, session: ReviewSession
+) -> None:
+    s = _segment_with_crop(session)
+    with TestClient(create_app(session)) as client:
+        client.put(f"/api/segments/{s}/label", json={"label": "other"})
+    session.close()
+    reopened = new_session(drive_path, session.run.root, tmp_path / "review")
+    try:
+        with TestClient(create_app(reopened)) as client:
+            row = client.get(f"/api/segments/{s}").json()
+        assert row["label"] == "other" and row["reviewed"] is True
+        assert row["history"][0]["new"] == "other"
+    finally:
+        reopened.close()
+
+
+def test_queue_puts_disagreement_and_uncertainty_first(client: TestClient, session: ReviewSession):
+    items = client.get("/api/queue", params={"limit": 50}).json()["items"]
+    scores = [row["score"] for row in items]
+    assert scores == sorted(scores, reverse=True)
+    seg = session.run.segments
+    disagree = int((seg["raw_label"] != seg["label"]).sum())
+    assert [row["reason"] for row in items[: min(disagree, 50)]] == ["disagrees"] * min(
+        disagree, 50
+    )
+    first = items[0]["id"]
+    client.put(f"/api/segments/{first}/label", json={"label": "other"})
+    assert first not in [row["id"] for row in client.get("/api/queue").json()["items"]]
+
+
+def test_selection_round_trip(client: TestClient, session: ReviewSession) -> None:
+    assert client.put("/api/selection", json={"segments": [3, 1, 3]}).json() == {"segments": [1, 3]}
+    assert client.get("/api/selection").json() == {"segments": [1, 3]}
+    heard = []
+    session.subscribe(lambda event, ids: heard.append((event, list(ids))))
+    client.put("/api/selection", json={"segments": [2]})
+    assert heard == [("selection", [2])]
+
+
+def test_crops_are_served_and_missing_ones_are_404(client: TestClient, session: ReviewSession):
+    s = _segment_with_crop(session)
+    response = client.get(f"/api/segments/{s}/crop.jpg")
+    assert response.status_code == 200 and response.headers["content-type"] == "image/jpeg"
+    assert response.content[:2] == b"\xff\xd8"
+    without = np.flatnonzero(session.run.segments["crop_status"] != 0)
+    if len(without):
+        assert client.get(f"/api/segments/{int(without[0])}/crop.jpg").status_code == 404
+
+
+def test_token_is_checked_on_every_api_call(session: ReviewSession) -> None:
+    with TestClient(create_app(session, token="s3cret")) as client:
+        for url in ("/api/info", "/api/segments", "/api/queue", "/api/models", "/api/downloads"):
+            assert client.get(url).status_code == 401, url
+        assert client.put("/api/segments/0/label", json={"label": "other"}).status_code == 401
+        assert client.post("/api/train").status_code == 401
+        wrong = {"Authorization": "Bearer nope"}
+        assert client.get("/api/info", headers=wrong).status_code == 401
+        good = {"Authorization": "Bearer s3cret"}
+        assert client.get("/api/info", headers=good).json()["token_required"] is True
+        assert client.get("/api/info", params={"token": "s3cret"}).status_code == 200
+        assert client.get("/static/index.html").status_code == 200  # pages hold no data
+    assert session.store.counts()["labelled_points"] == 0
+
+
+def test_serving_beyond_localhost_needs_a_token(drive_path: Path, run_path: Path) -> None:
+    from app.serve import serve
+
+    with pytest.raises(InvalidOptionError, match="--token"):
+        serve(drive_path, run_path, host="0.0.0.0")
+
+
+def test_downloads_are_listed_files_only(client: TestClient, session: ReviewSession) -> None:
+    items = {row["name"] for row in client.get("/api/downloads").json()["items"]}
+    assert {"inventory.csv", "inventory.geojson", "meshes/guardrails.glb"} <= items
+    csv = client.get("/api/downloads/inventory.csv")
+    assert csv.status_code == 200 and csv.text.startswith("run_id")
+    for sneaky in ("../run.json", "..%2Frun.json", "models.json", "meshes/../../run.json"):
+        assert client.get(f"/api/downloads/{sneaky}").status_code == 404, sneaky
+
+
+def test_fine_tune_then_activate(client: TestClient, session: ReviewSession) -> None:
+    current = session.models.active_version
+    # An operator corrects a few segments: the new model must learn from them.
+    seg = session.run.segments
+    guardrail = np.flatnonzero(seg["label"])[:5].tolist()
+    client.post("/api/labels/batch", json={"segments": guardrail, "label": "guardrail"})
+    job_id = client.post("/api/train", json={"mode": "fast"}).json()["job"]
+    job = client.jobs.wait(job_id, timeout=300)  # type: ignore[attr-defined]
+    assert job.status == "done", job.error
+    result = client.get(f"/api/jobs/{job_id}").json()["result"]
+    new, cur = result["metrics_new"], result["metrics_current"]
+    assert new is not None and cur is not None
+    assert new["n_held_out"] == cur["n_held_out"] == result["held_out_segments"] > 0
+    assert result["current_version"] == current
+
+    models = client.get("/api/models").json()
+    versions = {m["version"]: m for m in models["models"]}
+    assert models["active"] == current and versions[result["version"]]["active"] is False
+
+    assert client.post("/api/models/nonexistent/activate").status_code == 404
+    answer = client.post(f"/api/models/{result['version']}/activate").json()
+    assert answer["active"] == result["version"]
+    run = load_run(session.run.root)
+    assert run.info["model"]["version"] == result["version"]
+    assert client.get("/api/info").json()["model"]["version"] == result["version"]
+    # Operator labels outlive the model change.
+    rows = client.get("/api/segments", params={"reviewed": True, "limit": 100}).json()["items"]
+    assert sorted(row["id"] for row in rows) == guardrail
+    assert all(row["label"] == "guardrail" for row in rows)
+    # And the model that made the run can be activated again (its folder was given).
+    assert client.post(f"/api/models/{current}/activate").json()["active"] == current
+
+
+def test_a_second_training_while_one_runs_is_refused(client: TestClient) -> None:
+    first = client.post("/api/train").json()["job"]
+    second = client.post("/api/train")
+    if client.get(f"/api/jobs/{first}").json()["status"] in ("queued", "running"):
+        assert second.status_code == 409
+    client.jobs.wait(first, timeout=300)  # type: ignore[attr-defined]
+
+
+def test_reconstruction_is_redone_with_new_parameters(client: TestClient, session: ReviewSession):
+    bad = client.post("/api/reconstruction/apply", json={"params": {"pipes": {"nope": 1}}})
+    assert bad.status_code == 422
+    params = {"pipes": {"histogram_factor": 3.5}}
+    job_id = client.post("/api/reconstruction/apply", json={"params": params}).json()["job"]
+    job = client.jobs.wait(job_id, timeout=300)  # type: ignore[attr-defined]
+    assert job.status == "done", job.error
+    saved = json.loads((session.run.root / "reconstruction" / "models.json").read_text())
+    assert saved["params"]["pipes"]["histogram_factor"] == 3.5
+    assert client.get("/api/reconstruction").json()["params"]["pipes"]["histogram_factor"] == 3.5
