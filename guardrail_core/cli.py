@@ -467,7 +467,6 @@ def build_parser() -> argparse.ArgumentParser:
 
     _add_plugin_commands(sub)
 
-
     demo = sub.add_parser(
         "demo",
         help="simulate the sample drive, train on it and process it",
