@@ -36,6 +36,11 @@ def add_serve_command(sub: argparse._SubParsersAction) -> None:
         "--model", type=Path, help="the model folder that made the run (to re-activate it)"
     )
     serve.add_argument(
+        "--review-dir",
+        type=Path,
+        help="where labels and fine-tuned models are kept (default: DRIVE/review)",
+    )
+    serve.add_argument(
         "--window", type=float, default=100.0, help="metres of drive in the 3D scene (100)"
     )
     serve.add_argument(
@@ -56,6 +61,7 @@ def _serve(args: argparse.Namespace) -> int:
         token=args.token,
         operator=args.operator or getpass.getuser(),
         model_dir=args.model,
+        review_dir=args.review_dir,
         window_m=args.window,
         point_budget=args.point_budget,
     )

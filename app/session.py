@@ -125,6 +125,10 @@ class ReviewSession:
     def subscribe(self, listener: Listener) -> None:
         self._listeners.append(listener)
 
+    def unsubscribe(self, listener: Listener) -> None:
+        if listener in self._listeners:
+            self._listeners.remove(listener)
+
     def notify(self, event: str, segments: np.ndarray) -> None:
         for listener in list(self._listeners):
             listener(event, segments)

@@ -3,8 +3,9 @@
 The operators label drive points (:mod:`guardrail_core.label_store`); a segment of the run whose
 points carry operator labels takes their majority, every other segment keeps the run's corrected
 label (§3.3). A new model (crop classifier and segment head, :func:`train_on_set`) is trained on
-these labels, compared with the run's current model on the same held-out blocks of segments, and
-can then re-predict the run (:func:`predict_run`) and replace its predictions
+these labels, compared with the run's current model on the same held-out blocks of segments
+(against the operators' labels of the held-out segments they reviewed, when there are enough of
+them), and can then re-predict the run (:func:`predict_run`) and replace its predictions
 (:func:`write_predictions`).
 
 In fast mode the run's ``embeddings.npy`` stands in for the crops, so no image is decoded and the
@@ -53,6 +54,10 @@ __all__ = [
 #: Fields of segments.npz that :func:`predict_run` computes and :func:`write_predictions` replaces.
 PREDICTION_FIELDS = ("crop_probability", "probability", "raw_label", "label")
 MODES = ("fast", "full")
+#: ``"against"`` of :func:`train_from_run`'s metrics: the held-out segments an operator reviewed,
+#: their operator labels; or every held-out segment, the run's corrected label where not reviewed.
+AGAINST_OPERATOR = "operator labels"
+AGAINST_EFFECTIVE = "operator and corrected labels"
 
 
 def segment_labels(
@@ -197,16 +202,24 @@ def training_set_from_run(
 class ReviewTraining:
     """A model trained by :func:`train_from_run`, and how it compares with the run's model.
 
+    Both metrics are measured on the same segments against the same labels: the held-out
+    segments an operator reviewed, against the operators' labels, when at least
+    ``min_reviewed_held_out`` of them were reviewed (or all of them, as with
+    ``include_unreviewed`` False); else every held-out segment against the effective labels,
+    where the unreviewed ones carry the current model's own corrected labels, which favours it.
+
     Attributes
     ----------
     model : the new model (crop classifier and segment head)
     metrics_new : :func:`classification_metrics` (without ``n``, with ``n_train``,
-        ``n_held_out``, ``n_groups_held_out``, ``threshold``) of a new model trained without the
-        held-out segments, on them (= ``model.info["metrics"]["held_out"]``); None when nothing
-        could be held out
-    metrics_current : the same held-out segments and labels, the run's current predictions
-        (``probability >= threshold`` of the run's model, before correction)
-    held_out : (S,) bool over all the run's segments, the held-out ones
+        ``n_held_out`` (the segments measured), ``n_groups_held_out``, ``n_reviewed_held_out``,
+        ``threshold``, ``against``: :data:`AGAINST_OPERATOR` or :data:`AGAINST_EFFECTIVE`, and
+        with the latter a ``note``) of a new model trained without the held-out segments, on them
+        (= ``model.info["metrics"]["held_out"]``); None when nothing could be held out
+    metrics_current : the same for the run's current predictions (``probability >= threshold``
+        of the run's model, before correction), plus ``model``, its version
+    held_out : (S,) bool over all the run's segments, the held-out ones (all of them, reviewed
+        or not: the blocks the new model's segment head was measured without)
     seconds : wall time of the training
     """
 
@@ -224,6 +237,7 @@ def train_from_run(
     params: ClassifierParams = ClassifierParams(mode="fast"),
     head: SegmentHeadParams = SegmentHeadParams(),
     include_unreviewed: bool = True,
+    min_reviewed_held_out: int = 20,
     progress_fn: Callable[[float, str], None] | None = None,
 ) -> ReviewTraining:
     """Train a new model on a run's segments, labelled by the operators where they reviewed.
@@ -237,21 +251,36 @@ def train_from_run(
     head : segment head parameters
     include_unreviewed : train on every segment (the run's corrected label where not reviewed);
         False: only on the reviewed segments
+    min_reviewed_held_out : compare the models on the reviewed held-out segments, against the
+        operators' labels, when there are at least this many (>= 1); else on every held-out
+        segment against the effective labels (see :class:`ReviewTraining`)
     progress_fn : ``progress_fn(fraction 0..1, message)`` at each step
 
     Returns
     -------
     ReviewTraining
         ``model.info["trained_on"]`` says which labels ("operator labels (R segments) +
-        corrected labels"), the run and the counts; ``info["metrics"]["held_out_current"]`` holds
-        ``metrics_current``.
+        corrected labels"), the run and the counts; ``info["metrics"]["held_out"]`` holds
+        ``metrics_new``, ``info["metrics"]["held_out_current"]`` ``metrics_current``, and, when
+        they are measured against the operators' labels, ``info["metrics"]["held_out_all"]`` the
+        new model's figures on every held-out segment against the effective labels.
 
     Raises
     ------
+    InvalidOptionError
+        ``min_reviewed_held_out`` not a whole number >= 1.
     TrainingDataError
         No reviewed segment (with ``include_unreviewed`` False), labels of one class only, or too
         few crops.
     """
+    if (
+        not isinstance(min_reviewed_held_out, int | np.integer)
+        or isinstance(min_reviewed_held_out, bool)
+        or min_reviewed_held_out < 1
+    ):
+        raise InvalidOptionError(
+            f"min_reviewed_held_out: expected a whole number >= 1, got {min_reviewed_held_out!r}"
+        )
     clock = time.perf_counter()
     if progress_fn is not None:
         progress_fn(0.0, "reading the run")
@@ -262,11 +291,9 @@ def train_from_run(
         include_unreviewed=include_unreviewed,
         input_size=params.input_size,
     )
-    rows = (
-        np.arange(len(run))
-        if include_unreviewed
-        else np.flatnonzero(effective_labels(run, point_labels)[1])
-    )
+    reviewed_all = effective_labels(run, point_labels)[1]
+    rows = np.arange(len(run)) if include_unreviewed else np.flatnonzero(reviewed_all)
+    reviewed = reviewed_all[rows]
     n_reviewed = data.sources[0]["reviewed"]
     n_guardrail = int(data.labels.sum())
     if not include_unreviewed and n_reviewed == 0:
@@ -289,22 +316,38 @@ def train_from_run(
         "run_model": run.info.get("model", {}).get("version"),
         "reviewed_segments": n_reviewed,
     }
-    model, held = train_on_set(
+    trained = train_on_set(
         data, params=params, head=head, progress_fn=progress_fn, trained_on=trained_on
     )
-    metrics_new = model.info["metrics"]["held_out"]
-    metrics_current = None
+    model, held = trained.model, trained.held_out
+    metrics_new = metrics_current = None
     if held.any():
-        current = _current_raw_labels(run)[rows]
-        metrics_current = classification_metrics(data.labels[held], current[held])
-        metrics_current.pop("n")
-        metrics_current.update(
-            n_train=int((~held).sum()),
-            n_held_out=int(held.sum()),
-            n_groups_held_out=int(len(np.unique(data.groups[held]))),
-            threshold=_run_threshold(run),
-            model=run.info.get("model", {}).get("version"),
+        # data.labels are the operators' labels where reviewed, so on ``measured`` both models
+        # are scored against the operators alone; elsewhere the labels are the current model's.
+        held_reviewed = held & reviewed
+        n_reviewed_held = int(held_reviewed.sum())
+        extra: dict[str, Any] = {"n_reviewed_held_out": n_reviewed_held}
+        if n_reviewed_held >= min_reviewed_held_out or n_reviewed_held == int(held.sum()):
+            measured = held_reviewed
+            extra["against"] = AGAINST_OPERATOR
+        else:
+            measured = held
+            extra["against"] = AGAINST_EFFECTIVE
+            extra["note"] = (
+                f"only {n_reviewed_held} of the {int(held.sum())} held-out segments were "
+                f"reviewed (fewer than {min_reviewed_held_out}): the others are scored against "
+                "the current model's own corrected labels, which favours the current model"
+            )
+        metrics_new = _held_out_metrics(
+            data, held, measured, trained.held_out_predicted, params.threshold, extra
         )
+        metrics_current = _held_out_metrics(
+            data, held, measured, _current_raw_labels(run)[rows], _run_threshold(run), extra
+        )
+        metrics_current["model"] = run.info.get("model", {}).get("version")
+        if n_reviewed_held < int(held.sum()) and measured is held_reviewed:
+            model.info["metrics"]["held_out_all"] = model.info["metrics"]["held_out"]
+    model.info["metrics"]["held_out"] = metrics_new
     model.info["metrics"]["held_out_current"] = metrics_current
     held_out = np.zeros(len(run), bool)
     held_out[rows[held]] = True
@@ -479,6 +522,28 @@ def _check_point_labels(run: Run, point_labels: np.ndarray) -> None:
             f"point_labels: expected ({len(run.point_segment)},) labels, one per point of the "
             f"run's drive, got shape {shape} (labels of another drive?)"
         )
+
+
+def _held_out_metrics(
+    data: TrainingSet,
+    held: np.ndarray,
+    measured: np.ndarray,
+    predicted: np.ndarray,
+    threshold: float,
+    extra: dict[str, Any],
+) -> dict[str, Any]:
+    """:func:`classification_metrics` of ``predicted`` against ``data.labels`` on ``measured``
+    (held-out segments), without ``n``, with the counts, ``threshold`` and ``extra``."""
+    out = classification_metrics(data.labels[measured], predicted[measured])
+    out.pop("n")
+    out.update(
+        n_train=int((~held).sum()),
+        n_held_out=int(measured.sum()),
+        n_groups_held_out=int(len(np.unique(data.groups[measured]))),
+        threshold=threshold,
+        **extra,
+    )
+    return out
 
 
 def _run_threshold(run: Run) -> float:

@@ -63,6 +63,25 @@ class TrainingSet:
     embeddings: np.ndarray | None = None
 
 
+@dataclass(frozen=True)
+class SetTraining:
+    """A model trained by :func:`train_on_set`, and what it was measured on.
+
+    Attributes
+    ----------
+    model : GuardrailClassifier, with its segment head
+    held_out : (S,) bool, the segments ``model.info["metrics"]["held_out"]`` was measured on (all
+        False when nothing could be held out; the metrics are then None)
+    held_out_predicted : (S,) bool, on the held-out segments the raw label (``proba >=
+        threshold``, as the pipeline calls it) of the segment head trained without them; False
+        elsewhere
+    """
+
+    model: GuardrailClassifier
+    held_out: np.ndarray
+    held_out_predicted: np.ndarray
+
+
 def labelled_segments(
     drive_paths: Sequence[Path],
     crop_size: int,
@@ -138,14 +157,13 @@ def train_from_drives(
     if not drive_paths:
         raise TrainingDataError("no drives given to train on")
     data = labelled_segments(drive_paths, params.input_size, extraction, progress=progress)
-    model, _ = train_on_set(
+    return train_on_set(
         data,
         params=params,
         head=head,
         progress=progress,
         trained_on={"drives": data.sources, "labels": "truth"},
-    )
-    return model
+    ).model
 
 
 def train_on_set(
@@ -156,7 +174,7 @@ def train_on_set(
     progress: bool = False,
     progress_fn: Callable[[float, str], None] | None = None,
     trained_on: dict[str, Any] | None = None,
-) -> tuple[GuardrailClassifier, np.ndarray]:
+) -> SetTraining:
     """Train the crop classifier and the segment head on a training set.
 
     1. The crop classifier on every crop (:func:`train_classifier`; its held-out figures go to
@@ -166,7 +184,8 @@ def train_on_set(
        that is ``head.folds`` more fine-tunings).
     3. The segment head on every segment, from its features and its out-of-fold crop
        probability; measured first on held-out blocks (``info["metrics"]["held_out"]``, every
-       segment, with or without a crop), then refit on all.
+       segment, with or without a crop, called guardrail at ``proba >= threshold`` like the
+       pipeline), then refit on all.
 
     Parameters
     ----------
@@ -182,9 +201,10 @@ def train_on_set(
 
     Returns
     -------
-    model : GuardrailClassifier, with its segment head
-    held_out : (S,) bool, the segments ``info["metrics"]["held_out"]`` was measured on (all
-        False when nothing could be held out; the metrics are then None)
+    SetTraining
+        The model, the held-out segments and the held-out segment head's raw labels on them (for
+        measuring against other labels, as :func:`~guardrail_core.review_training.train_from_run`
+        does).
 
     Raises
     ------
@@ -250,12 +270,16 @@ def train_on_set(
     rng = np.random.default_rng(params.seed)
     held = held_out_mask(data.labels, data.groups, params.held_out_fraction, rng)
     held_out = None
+    held_predicted = np.zeros(len(data.labels), bool)
     report("segment head: measuring on held-out blocks")
     if held.any():
         measured = fit_segment_head(
             data.features[~held], crop_proba[~held], data.labels[~held], head, seed=params.seed
         )
-        predicted = measured.proba(data.features[held], crop_proba[held]) > params.threshold
+        proba = measured.proba(data.features[held], crop_proba[held])
+        # ">=" as the pipeline calls a segment guardrail (process_drive, predict_run).
+        predicted = np.nan_to_num(proba, nan=0.0) >= params.threshold
+        held_predicted[held] = predicted
         held_out = classification_metrics(data.labels[held], predicted)
         held_out.pop("n")
         held_out.update(
@@ -279,7 +303,7 @@ def train_on_set(
     info["version"] = model_version(datetime.fromisoformat(info["created"]), model.weights())
     if progress_fn is not None:
         progress_fn(1.0, "done")
-    return model, held
+    return SetTraining(model=model, held_out=held, held_out_predicted=held_predicted)
 
 
 def _out_of_fold_crop_proba(

@@ -12,12 +12,14 @@ import numpy as np
 import pytest
 
 from guardrail_core.errors import InvalidOptionError, TrainingDataError
-from guardrail_core.extract.classify import EMBEDDING_DIM, ClassifierParams
+from guardrail_core.extract.classify import EMBEDDING_DIM, ClassifierParams, held_out_mask
 from guardrail_core.extract.crops import CROP_OK
 from guardrail_core.extract.model_store import load_model
 from guardrail_core.extract.segment_head import SegmentHeadParams
 from guardrail_core.label_store import LABEL_GUARDRAIL, LABEL_OTHER, UNLABELLED
 from guardrail_core.review_training import (
+    AGAINST_EFFECTIVE,
+    AGAINST_OPERATOR,
     effective_labels,
     predict_run,
     read_crops,
@@ -51,6 +53,34 @@ def _flip_some(run: Run, k: int = 3) -> tuple[np.ndarray, np.ndarray]:
     labels = _label_segments(run, np.flatnonzero(label)[:k], LABEL_OTHER)
     labels = _label_segments(run, np.flatnonzero(~label)[:k], LABEL_GUARDRAIL, labels)
     return labels, np.sort(flipped)
+
+
+def _held_out_of(run: Run, point_labels: np.ndarray) -> np.ndarray:
+    """(S,) bool, the held-out split train_from_run (fast, default parameters) will draw."""
+    data = training_set_from_run(run, point_labels)
+    params = ClassifierParams(mode="fast")
+    rng = np.random.default_rng(params.seed)
+    return held_out_mask(data.labels, data.groups, params.held_out_fraction, rng)
+
+
+def _review_most(run: Run) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Operator labels on every segment but a few held-out ones, opposite to the run's on every
+    fifth segment: (point labels, (S,) int8 operator label per segment, (S,) bool held out).
+
+    The few held-out segments left unreviewed keep the run's label either way, so the effective
+    labels, and with them the held-out split, are those of everything reviewed."""
+    label = run.segments["label"]
+    operator = label.astype(np.int8)
+    operator[::5] = ~label[::5]
+    segment = run.point_segment
+    every = np.where(segment >= 0, operator[np.maximum(segment, 0)], UNLABELLED).astype(np.int8)
+    held = _held_out_of(run, every)
+    unreviewed = [s for s in np.flatnonzero(held) if s % 5][:4]
+    assert len(unreviewed) == 4
+    operator[unreviewed] = UNLABELLED
+    labels = np.where(np.isin(segment, unreviewed), UNLABELLED, every).astype(np.int8)
+    assert np.array_equal(_held_out_of(run, labels), held)
+    return labels, operator, held
 
 
 def test_segment_labels_on_a_hand_made_example() -> None:
@@ -150,6 +180,9 @@ def test_train_from_run_compares_on_the_same_held_out_segments(run_path: Path) -
     assert new["n_held_out"] == current["n_held_out"] == int(held.sum())
     assert new["n_train"] == current["n_train"] == int((~held).sum())
     assert new["n_groups_held_out"] == current["n_groups_held_out"]
+    # 6 reviewed segments: too few to measure on alone, so the corrected labels count too.
+    assert new["against"] == current["against"] == AGAINST_EFFECTIVE
+    assert new["note"] == current["note"] and "favours the current model" in new["note"]
     # The current model's figures, recomputed here from the run and the same held-out segments.
     effective, _ = effective_labels(run, labels)
     called = np.nan_to_num(run.segments["probability"], nan=0.0) >= run.info["model"]["threshold"]
@@ -168,6 +201,83 @@ def test_train_from_run_compares_on_the_same_held_out_segments(run_path: Path) -
     fractions = [f for f, _ in reports]
     assert fractions == sorted(fractions) and fractions[0] == 0.0 and fractions[-1] == 1.0
     assert any("fold" in m for _, m in reports)
+
+
+def test_train_from_run_compares_against_the_operators_labels(run_path: Path) -> None:
+    run = load_run(run_path)
+    labels, operator, held = _review_most(run)
+    # The test run holds out one block of 20 segments, 16 of them reviewed here: fewer than the
+    # default 20 (the fallback, test_train_from_run_compares_on_the_same_held_out_segments).
+    trained = train_from_run(run, labels, min_reviewed_held_out=10)
+    new, current = trained.metrics_new, trained.metrics_current
+    assert new is not None and current is not None
+    assert np.array_equal(trained.held_out, held)
+    measured = held & (operator >= 0)
+    assert 10 <= measured.sum() < held.sum()  # the 4 unreviewed held-out segments left out
+    truth = operator[measured] == 1
+    # Some of the measured segments were flipped against the run's label.
+    assert (truth != run.segments["label"][measured]).sum() >= 3
+    for metrics in (new, current):
+        assert metrics["against"] == AGAINST_OPERATOR and "note" not in metrics
+        assert metrics["n_held_out"] == metrics["n_reviewed_held_out"] == int(measured.sum())
+        assert metrics["n_train"] == int((~held).sum())
+        assert metrics["guardrail"]["n"] == int(truth.sum())
+        assert metrics["other"]["n"] == int((~truth).sum())
+    # The run's model, by hand: its stored probability >= its threshold, on exactly those.
+    threshold = run.info["model"]["threshold"]
+    called = np.nan_to_num(run.segments["probability"], nan=0.0) >= threshold
+    assert current["threshold"] == threshold
+    assert current["accuracy"] == pytest.approx(np.mean(truth == called[measured]))
+    # Not what the biased comparison (the run's own labels on every held-out segment) gives.
+    effective, _ = effective_labels(run, labels)
+    assert current["accuracy"] != pytest.approx(np.mean(effective[held] == called[held]))
+    info = trained.model.info["metrics"]
+    assert info["held_out"] == new and info["held_out_current"] == current
+    assert info["held_out_all"]["n_held_out"] == int(held.sum())
+
+
+def test_train_from_run_falls_back_to_the_effective_labels(run_path: Path) -> None:
+    run = load_run(run_path)
+    labels, operator, held = _review_most(run)
+    n_reviewed = int((held & (operator >= 0)).sum())
+    trained = train_from_run(run, labels, min_reviewed_held_out=n_reviewed + 1)
+    new, current = trained.metrics_new, trained.metrics_current
+    assert new is not None and current is not None
+    effective, _ = effective_labels(run, labels)
+    called = np.nan_to_num(run.segments["probability"], nan=0.0) >= run.info["model"]["threshold"]
+    for metrics in (new, current):
+        assert metrics["against"] == AGAINST_EFFECTIVE
+        assert f"only {n_reviewed} of the {int(held.sum())}" in metrics["note"]
+        assert metrics["n_held_out"] == int(held.sum())
+        assert metrics["n_reviewed_held_out"] == n_reviewed
+        assert metrics["guardrail"]["n"] == int(effective[held].sum())
+    assert current["accuracy"] == pytest.approx(np.mean(effective[held] == called[held]))
+    assert "held_out_all" not in trained.model.info["metrics"]
+
+    # Trained on the reviewed segments only, every held-out one is reviewed: the operators'
+    # labels, however few.
+    only = train_from_run(run, labels, include_unreviewed=False, min_reviewed_held_out=10_000)
+    assert only.metrics_new is not None and only.metrics_current is not None
+    assert only.metrics_new["against"] == only.metrics_current["against"] == AGAINST_OPERATOR
+    n = int(only.held_out.sum())
+    assert only.metrics_new["n_held_out"] == only.metrics_current["n_held_out"] == n
+    assert not (only.held_out & (operator < 0)).any()
+    for bad in (0, -1, 2.5, True):
+        with pytest.raises(InvalidOptionError, match="min_reviewed_held_out"):
+            train_from_run(run, labels, min_reviewed_held_out=bad)  # type: ignore[arg-type]
+
+
+def test_train_on_set_gives_the_held_out_predictions(run_path: Path) -> None:
+    run = load_run(run_path)
+    data = training_set_from_run(run, np.full(len(run.point_segment), -1, np.int8))
+    trained = train_on_set(data, params=ClassifierParams(mode="fast"), head=data_head())
+    held, predicted = trained.held_out, trained.held_out_predicted
+    assert held.shape == predicted.shape == (len(run),) and predicted.dtype == bool
+    assert held.any() and not predicted[~held].any()
+    metrics = trained.model.info["metrics"]["held_out"]
+    assert metrics["n_held_out"] == int(held.sum())
+    assert metrics["accuracy"] == pytest.approx(np.mean(data.labels[held] == predicted[held]))
+    assert metrics["guardrail"]["n"] == int(data.labels[held].sum())
 
 
 def test_train_from_run_on_one_class_of_operator_labels_is_refused(run_path: Path) -> None:

@@ -84,6 +84,7 @@ class ReviewScene:
         self._meshes: dict[int, viser.GlbHandle | viser.MeshHandle] = {}
         self._last_tuned_mesh: trimesh.Trimesh | None = None
         self._fly_on_select = True
+        self._quiet_sliders = False  # set while the code, not an operator, moves the sliders
         self._tuner: RunTuner | None = None
         self._tune_timer: threading.Timer | None = None
         self.last_tune_seconds: float | None = None
@@ -93,6 +94,7 @@ class ReviewScene:
         self.show_window(self.start_m)
         self._add_trajectory()
         self.load_meshes()
+        server.on_client_connect(self._on_connect)
         server.scene.on_click()(self._on_click)
         server.scene.on_rect_select(modifier="shift")(self._on_rect_select)
         session.subscribe(self._on_session_event)
@@ -257,18 +259,40 @@ class ReviewScene:
 
     def fly_to(self, segment: int) -> None:
         """Move the window and every browser's camera to a segment."""
-        seg = self.session.run.segments
-        target = seg["centroid"][segment]
+        target = self.session.run.segments["centroid"][segment]
         station = float(np.median(self.station[self.session.index.points_of([segment])]))
         if not self.start_m <= station < self.start_m + self.window_m:
             self.show_window(station - self.window_m / 2)
-        trajectory = self.session.drive.trajectory.position
-        nearest = trajectory[np.argmin(np.linalg.norm(trajectory - target, axis=1))]
-        eye = nearest + np.array([0.0, 0.0, 3.0])
-        eye = eye + (eye - target) / max(np.linalg.norm(eye - target), 1e-6) * 4.0
         for client in self.server.get_clients().values():
-            client.camera.position = eye
-            client.camera.look_at = target
+            self._look_at(client, target, distance_m=8.0)
+
+    def _look_at(self, client: viser.ClientHandle, target: np.ndarray, distance_m: float) -> None:
+        """Put a browser's camera above the trajectory beside ``target``, looking at it."""
+        trajectory = self.session.drive.trajectory.position
+        nearest = int(np.argmin(np.linalg.norm(trajectory - target, axis=1)))
+        back = trajectory[max(nearest - 1, 0)] - trajectory[min(nearest + 1, len(trajectory) - 1)]
+        back = back / max(float(np.linalg.norm(back)), 1e-9)
+        eye = trajectory[nearest] + 0.5 * distance_m * back + np.array([0.0, 0.0, 0.4 * distance_m])
+        eye = target + (eye - target) / max(float(np.linalg.norm(eye - target)), 1e-9) * distance_m
+        client.camera.position = eye
+        client.camera.look_at = target
+
+    def _on_connect(self, client: viser.ClientHandle) -> None:
+        """A new browser starts at the selection, or at the start of the window."""
+        if len(self.session.selection):
+            target = self.session.run.segments["centroid"][int(self.session.selection[0])]
+            self._look_at(client, target, distance_m=8.0)
+            return
+        shown = self.session.drive.points.xyz[self.points]
+        ahead = self.station[self.points] < self.start_m + 0.3 * self.window_m
+        target = np.median(shown[ahead] if ahead.any() else shown, axis=0)
+        self._look_at(client, target, distance_m=25.0)
+
+    def close(self) -> None:
+        """Stop listening to the session and cancel a pending re-run."""
+        self.session.unsubscribe(self._on_session_event)
+        if self._tune_timer is not None:
+            self._tune_timer.cancel()
 
     # -- session events ---------------------------------------------------------------------
 
@@ -398,20 +422,24 @@ class ReviewScene:
     # -- tuning -----------------------------------------------------------------------------
 
     def _update_tuning_runs(self) -> None:
-        if self._tuner is None or not self._tuner.tunable_runs():
-            self._run_choice.options = ("none",)
-            self._run_choice.value = "none"  # type: ignore[misc]
-            return
-        options = tuple(
-            f"run {r.run_id} ({r.model.type}, {len(r.units)} units)"
-            for r in self._tuner.tunable_runs()
-            if r.model is not None
-        )
-        self._run_choice.options = options
-        self._run_choice.value = options[0]  # type: ignore[misc]
-        params = self._tuner.params
-        for (stage, name), slider in self._sliders.items():
-            slider.value = getattr(getattr(params, stage), name)
+        """Offer the runs with a unit model and set the sliders to their parameters, without
+        re-running anything (no operator moved them)."""
+        self._quiet_sliders = True
+        try:
+            runs = self._tuner.tunable_runs() if self._tuner is not None else []
+            options = tuple(
+                f"run {r.run_id} ({r.model.type}, {len(r.units)} units)"
+                for r in runs
+                if r.model is not None
+            ) or ("none",)
+            self._run_choice.options = options
+            self._run_choice.value = options[0]  # type: ignore[misc]
+            if self._tuner is not None:
+                params = self._tuner.params
+                for (stage, name), slider in self._sliders.items():
+                    slider.value = getattr(getattr(params, stage), name)
+        finally:
+            self._quiet_sliders = False
 
     def _chosen_run(self) -> int | None:
         value = self._run_choice.value
@@ -421,6 +449,8 @@ class ReviewScene:
         self._schedule_tune()
 
     def _schedule_tune(self) -> None:
+        if self._quiet_sliders:
+            return
         if self._tune_timer is not None:
             self._tune_timer.cancel()
         self._tune_timer = threading.Timer(DEBOUNCE_S, self.retune)
