@@ -7,7 +7,9 @@ STAMP := $(VENV)/.installed
 SYS_STAMP := $(VENV)/.system-packages
 DEMO_DRIVE ?= demo_output/sample_drive
 
-.PHONY: setup demo test lint bench clean
+BROWSER := /usr/bin/chromium
+
+.PHONY: setup demo serve test lint bench clean browser
 
 setup: $(STAMP)
 
@@ -32,15 +34,27 @@ $(STAMP): pyproject.toml $(SYS_STAMP)
 	$(BIN)/pip install -q -e '.[dev]'
 	@touch $@
 
+# The demo ends by serving the sample drive in the review app (Ctrl+C stops it).
 demo: setup
 	$(BIN)/guardrail demo --out $(DEMO_DRIVE)
+	$(BIN)/guardrail serve $(DEMO_DRIVE) --run $(dir $(DEMO_DRIVE))run --model $(dir $(DEMO_DRIVE))model
+
+serve: setup
+	$(BIN)/guardrail serve $(DEMO_DRIVE) --run $(dir $(DEMO_DRIVE))run --model $(dir $(DEMO_DRIVE))model
+
+# Browser tests drive Debian's Chromium (Playwright's own browser download cannot work offline).
+browser:
+	@test -x $(BROWSER) || { \
+		SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
+		echo "installing Debian's chromium for the browser tests"; \
+		$$SUDO apt-get update -qq && $$SUDO apt-get install -y -qq chromium; }
 
 lint: setup
 	$(BIN)/ruff check guardrail_core app tests benchmarks docs
 	$(BIN)/ruff format --check guardrail_core app tests benchmarks docs
 	$(BIN)/mypy
 
-test: lint
+test: lint browser
 	$(BIN)/pytest -n 2 -q
 
 bench: setup
@@ -48,6 +62,7 @@ bench: setup
 	@test -f $(DEMO_DRIVE)/drive.json || $(BIN)/guardrail demo --out $(DEMO_DRIVE) --quiet
 	$(BIN)/python benchmarks/bench_extract.py --drive $(DEMO_DRIVE)
 	$(BIN)/python benchmarks/bench_reconstruct.py --run $(dir $(DEMO_DRIVE))run
+	$(BIN)/python benchmarks/bench_app.py --drive $(DEMO_DRIVE) --run $(dir $(DEMO_DRIVE))run
 
 clean:
 	rm -rf $(VENV) demo_output .pytest_cache .ruff_cache .mypy_cache

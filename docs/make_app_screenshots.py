@@ -1,0 +1,110 @@
+"""Screenshots of the review app for the README: the 3D scene with a selected segment, and the
+crop gallery.
+
+Serves a drive (default: the demo's) with ``guardrail serve`` on free ports, drives Debian's
+Chromium with Playwright and writes PNGs into ``docs/images/``. Labels go to a temporary review
+folder, so the drive is left as it was.
+
+    .venv/bin/python docs/make_app_screenshots.py [--drive D] [--run R] [--model M] [--segment S]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+import urllib.request
+from pathlib import Path
+
+from playwright.sync_api import sync_playwright
+
+ROOT = Path(__file__).resolve().parent.parent
+IMAGES = ROOT / "docs" / "images"
+CHROMIUM_ARGS = [
+    "--no-sandbox",
+    "--use-angle=swiftshader",
+    "--enable-unsafe-swiftshader",
+    "--ignore-gpu-blocklist",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--no-first-run",
+]
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def wait_for(url: str, timeout: float = 180.0) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            urllib.request.urlopen(url, timeout=5).read()
+            return
+        except OSError:
+            time.sleep(0.5)
+    raise TimeoutError(url)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    demo = ROOT / "demo_output"
+    parser.add_argument("--drive", type=Path, default=demo / "sample_drive")
+    parser.add_argument("--run", type=Path, default=demo / "run")
+    parser.add_argument("--model", type=Path, default=demo / "model")
+    parser.add_argument("--segment", type=int, help="segment to select (default: a pipe's)")
+    args = parser.parse_args()
+
+    port, scene_port = free_port(), free_port()
+    with tempfile.TemporaryDirectory() as review:
+        server = subprocess.Popen(
+            [sys.executable, "-m", "guardrail_core.cli", "serve", str(args.drive)]
+            + ["--run", str(args.run), "--model", str(args.model), "--review-dir", review]
+            + ["--port", str(port), "--scene-port", str(scene_port), "--operator", "docs"],
+            stdout=subprocess.DEVNULL,
+        )
+        try:
+            url = f"http://127.0.0.1:{port}"
+            wait_for(f"{url}/api/info")
+            segment = args.segment
+            if segment is None:
+                query = "/api/segments?label=guardrail&crop=true&sort=-probability&limit=1"
+                with urllib.request.urlopen(url + query) as response:
+                    segment = json.loads(response.read())["items"][0]["id"]
+            shoot(url, segment)
+        finally:
+            server.terminate()
+            server.wait(timeout=30)
+
+
+def shoot(url: str, segment: int) -> None:
+    IMAGES.mkdir(parents=True, exist_ok=True)
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path="/usr/bin/chromium", args=CHROMIUM_ARGS)
+        page = browser.new_page(viewport={"width": 1440, "height": 900})
+        page.goto(f"{url}/?segment={segment}")
+        page.wait_for_selector("#selected-crop", timeout=30_000)
+        scene = page.frame_locator("#scene")
+        scene.get_by_text("Connected").wait_for(timeout=60_000)
+        time.sleep(8)  # software WebGL draws 400,000 points slowly
+        close = scene.locator(".mantine-Notification-closeButton")
+        if close.count():
+            close.first.click()
+        page.screenshot(path=IMAGES / "app_review.png")
+
+        page.goto(f"{url}/gallery")
+        page.wait_for_selector("#gallery-grid .crop", timeout=30_000)
+        time.sleep(3)
+        page.screenshot(path=IMAGES / "app_gallery.png")
+        browser.close()
+    print(f"wrote {IMAGES}/app_review.png and app_gallery.png")
+
+
+if __name__ == "__main__":
+    main()
