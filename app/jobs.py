@@ -63,6 +63,12 @@ class JobRunner:
         with self._lock:
             return self._jobs.get(job_id)
 
+    def list(self, kind: str | None = None) -> list[Job]:
+        """Jobs (of one kind when given), newest first."""
+        with self._lock:
+            jobs = [j for j in self._jobs.values() if kind is None or j.kind == kind]
+        return sorted(jobs, key=lambda j: j.created, reverse=True)
+
     def busy(self, kind: str) -> Job | None:
         """A queued or running job of that kind, if any."""
         with self._lock:

@@ -210,6 +210,9 @@ def test_fine_tune_then_activate(client: TestClient, session: ReviewSession) -> 
     job_id = client.post("/api/train", json={"mode": "fast"}).json()["job"]
     job = client.jobs.wait(job_id, timeout=300)  # type: ignore[attr-defined]
     assert job.status == "done", job.error
+    listed = client.get("/api/jobs", params={"kind": "train"}).json()["items"]
+    assert [j["id"] for j in listed] == [job_id] and listed[0]["status"] == "done"
+    assert client.get("/api/jobs/nope").status_code == 404
     result = client.get(f"/api/jobs/{job_id}").json()["result"]
     new, cur = result["metrics_new"], result["metrics_current"]
     assert new is not None and cur is not None

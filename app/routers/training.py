@@ -40,6 +40,13 @@ def post_train(session: Session, jobs: Jobs, body: TrainBody | None = None) -> d
     return {"job": jobs.submit("train", work).id}
 
 
+@router.get("/jobs")
+def list_jobs(jobs: Jobs, kind: str | None = None) -> dict[str, Any]:
+    """Jobs of this server (of one ``kind`` when given: train, reconstruct), newest first; a
+    reloaded page finds a training still running here."""
+    return {"items": [job.to_json() for job in jobs.list(kind)]}
+
+
 @router.get("/jobs/{job_id}")
 def get_job(jobs: Jobs, job_id: str) -> dict[str, Any]:
     job = jobs.get(job_id)

@@ -387,6 +387,16 @@ async function startTraining() {
   }
 }
 
+async function resumeTraining() {
+  const { items } = await api.get("/api/jobs?kind=train");
+  const running = items.find((job) => job.status === "queued" || job.status === "running");
+  if (!running) return;
+  $("train").disabled = true;
+  $("train-status").hidden = false;
+  state.job = { id: running.id, result: null };
+  pollJob(running.id, 0);
+}
+
 function pollJob(jobId, failures) {
   setTimeout(async () => {
     let job;
@@ -586,6 +596,7 @@ async function init() {
     if ($("banner").dataset.sticky) return; // nothing else will work either
   }
   loadQueue().catch((err) => toast(`queue: ${err.message}`, "error"));
+  resumeTraining().catch(() => {}); // a training started before a reload goes on showing
 
   const wanted = new URLSearchParams(window.location.search).get("segment");
   if (wanted !== null && /^\d+$/.test(wanted)) {
