@@ -255,3 +255,25 @@ def test_reconstruction_is_redone_with_new_parameters(client: TestClient, sessio
     saved = json.loads((session.run.root / "reconstruction" / "models.json").read_text())
     assert saved["params"]["pipes"]["histogram_factor"] == 3.5
     assert client.get("/api/reconstruction").json()["params"]["pipes"]["histogram_factor"] == 3.5
+
+
+def test_guardrail_train_takes_the_store_labels(
+    session: ReviewSession, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from guardrail_core.cli import main
+    from guardrail_core.extract.model_store import load_model
+
+    seg = session.run.segments
+    session.relabel(np.flatnonzero(seg["label"])[:3], "other")
+    store = session.store.path
+    out = tmp_path / "model"
+    run = str(session.run.root)
+    assert main(["train", "--run", run, "--labels", str(store), "--out", str(out)]) == 0
+    assert "operator-labelled points" in capsys.readouterr().out
+    trained_on = load_model(out).info["trained_on"]
+    assert "operator labels" in json.dumps(trained_on)
+    # Drives and --run together, or a store that is not there, are named errors.
+    assert main(["train", "x", "--run", run, "--out", str(tmp_path / "m2")]) == 2
+    missing = ["train", "--run", run, "--labels", str(tmp_path / "nope.sqlite"), "--out", "m3"]
+    assert main(missing) == 2
+    assert "LabelStoreError" in capsys.readouterr().err

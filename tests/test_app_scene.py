@@ -143,3 +143,6 @@ def test_retuning_a_run_changes_its_model_and_keeps_the_run_folder(
     seconds = scene.retune()
     assert seconds is not None and seconds < 5.0
     assert "ms" in scene._tune_text.content
+    chosen = scene._chosen_run()
+    assert chosen is not None and chosen in scene._ghosts  # the previous mesh, ghosted
+    assert chosen in scene._shown_mesh

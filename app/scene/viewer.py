@@ -30,6 +30,7 @@ from app.segment_views import review_queue
 from app.session import ReviewSession
 from guardrail_core.errors import GuardrailError, RunFolderError
 from guardrail_core.extract.track import track_coordinates
+from guardrail_core.reconstruct.assemble import run_mesh
 from guardrail_core.reconstruction import RECONSTRUCTION_DIR, ReconstructionParams
 
 #: Mesh colours: the reconstruction, a retuned run, and the ghost of its previous mesh.
@@ -82,7 +83,8 @@ class ReviewScene:
         self._cloud: viser.PointCloudHandle | None = None
         self._frusta: list[viser.CameraFrustumHandle] = []
         self._meshes: dict[int, viser.GlbHandle | viser.MeshHandle] = {}
-        self._last_tuned_mesh: trimesh.Trimesh | None = None
+        self._shown_mesh: dict[int, trimesh.Trimesh] = {}  # per run: the mesh now shown
+        self._ghosts: dict[int, viser.MeshHandle] = {}
         self._fly_on_select = True
         self._quiet_sliders = False  # set while the code, not an operator, moves the sliders
         self._tuner: RunTuner | None = None
@@ -209,6 +211,9 @@ class ReviewScene:
 
     def load_meshes(self) -> None:
         """Show every reconstructed run's mesh (from ``reconstruction/meshes``)."""
+        self._shown_mesh = {}
+        for name in list(self._ghosts):
+            self._ghosts.pop(name).remove()
         for handle in list(self._meshes.values()):
             handle.remove()
         self._meshes = {}
@@ -478,11 +483,13 @@ class ReviewScene:
             return None
         name = f"/reconstruction/run_{run_id:03d}"
         previous = self._meshes.pop(run_id, None)
-        ghost = getattr(self, "_last_tuned_mesh", None)
+        ghost = self._shown_mesh.get(run_id)
+        if ghost is None:  # first re-run: the ghost is the reconstruction's own mesh
+            ghost = run_mesh(self._tuner.run(run_id), self._tuner.params.sweep)
         if previous is not None:
             previous.remove()
         if ghost is not None:
-            self.server.scene.add_mesh_simple(
+            self._ghosts[run_id] = self.server.scene.add_mesh_simple(
                 f"/reconstruction/ghost_{run_id:03d}",
                 vertices=ghost.vertices.astype(np.float32),
                 faces=ghost.faces.astype(np.uint32),
@@ -496,7 +503,7 @@ class ReviewScene:
             faces=mesh.faces.astype(np.uint32),
             color=TUNED_COLOUR,
         )
-        self._last_tuned_mesh = mesh
+        self._shown_mesh[run_id] = mesh
         histogram = result.unit.histogram
         if histogram is not None:
             centres = 0.5 * (histogram.edges[:-1] + histogram.edges[1:])
