@@ -322,98 +322,58 @@ def verdict(seconds: float, target: float, strict: bool = False) -> str:
     return "PASS" if (seconds < target if strict else seconds <= target) else "FAIL"
 
 
-def print_table(result: dict[str, Any]) -> None:
-    def ms(s: float) -> str:
-        return f"{1000 * s:,.0f} ms" if s < 10 else f"{s:.1f} s"
+def ms(s: float) -> str:
+    return f"{1000 * s:,.0f} ms" if s < 10 else f"{s:.1f} s"
 
+
+def timing_row(
+    name: str, stats: dict[str, Any], target_s: float | None = None, *, strict: bool = False
+) -> tuple[str, str, str, str, str]:
+    """A table row: median, max and, with a target, the target and the verdict on the median."""
+    if target_s is None:
+        target, ok = "", ""
+    else:
+        target = f"{'<' if strict else '<='} {ms(target_s)}"
+        ok = verdict(stats["median_s"], target_s, strict)
+    return name, ms(stats["median_s"]), ms(stats["max_s"]), target, ok
+
+
+def print_table(result: dict[str, Any]) -> None:
     rows: list[tuple[str, str, str, str, str]] = []
-    load = result["load_s"]
-    rows.append(("load (ReviewSession: drive + run)", ms(load), "", "", ""))
+    rows.append(("load (ReviewSession: drive + run)", ms(result["load_s"]), "", "", ""))
     sc = result["scene"]
     rows.append(("viser server start", ms(sc["server_start"]["median_s"]), "", "", ""))
-    c = sc["construct"]
+    c, w = sc["construct"], sc["show_window"]
+    window = f"{WINDOW_M:.0f} m window ({sc['first_window_points']:,} pts)"
+    rows.append(timing_row(f"first scene: ReviewScene, {window}", c, TARGET_SCENE_S))
+    rows.append(timing_row("  of which stations of every point (track)", sc["stations"]))
     rows.append(
-        (
-            f"first scene: ReviewScene, {WINDOW_M:.0f} m window ({sc['first_window_points']:,} pts)",
-            ms(c["median_s"]),
-            ms(c["max_s"]),
-            f"<= {TARGET_SCENE_S:.0f} s",
-            verdict(c["median_s"], TARGET_SCENE_S),
-        )
+        timing_row(f"show_window, fresh window ({sc['window_points']:,} pts)", w, TARGET_SCENE_S)
     )
-    st = sc["stations"]
-    rows.append(
-        ("  of which stations of every point (track)", ms(st["median_s"]), ms(st["max_s"]), "", "")
-    )
-    w = sc["show_window"]
-    rows.append(
-        (
-            f"show_window, fresh window ({sc['window_points']:,} pts)",
-            ms(w["median_s"]),
-            ms(w["max_s"]),
-            f"<= {TARGET_SCENE_S:.0f} s",
-            verdict(w["median_s"], TARGET_SCENE_S),
-        )
-    )
-    r = result["relabel"]
-    rows.append(
-        (
-            f"relabel -> recolour, session (x{r['n']})",
-            ms(r["median_s"]),
-            ms(r["max_s"]),
-            f"<= {1000 * TARGET_RELABEL_S:.0f} ms",
-            verdict(r["median_s"], TARGET_RELABEL_S),
-        )
-    )
-    rr = result["relabel_rest"]
-    rows.append(
-        (
-            f"relabel -> recolour, PUT /api (x{rr['n']})",
-            ms(rr["median_s"]),
-            ms(rr["max_s"]),
-            "(comparison)",
-            "",
-        )
-    )
+    r, rr = result["relabel"], result["relabel_rest"]
+    rows.append(timing_row(f"relabel -> recolour, session (x{r['n']})", r, TARGET_RELABEL_S))
+    rows.append(timing_row(f"relabel -> recolour, PUT /api (x{rr['n']}) (comparison)", rr))
     t = result["retrain"]
-    fr = t["train_from_run"]
+    a = t["at_2000"]
+    own_target = TARGET_RETRAIN_S if a["what"] == "train_from_run" else None
     rows.append(
-        (
-            f"retrain fast: train_from_run ({t['crops']:,} crops)",
-            ms(fr["median_s"]),
-            ms(fr["max_s"]),
-            f"<= {TARGET_RETRAIN_S:.0f} s" if t["at_2000"]["what"] == "train_from_run" else "",
-            verdict(fr["median_s"], TARGET_RETRAIN_S)
-            if t["at_2000"]["what"] == "train_from_run"
-            else "",
+        timing_row(
+            f"retrain fast: train_from_run ({t['crops']:,} crops)", t["train_from_run"], own_target
         )
     )
-    a = t["at_2000"]
     if a["what"] == "train_on_set":
-        rows.append(
-            (
-                f"retrain fast: train_on_set, run x{a['copies']} ({a['crops']:,} crops)",
-                ms(a["median_s"]),
-                ms(a["max_s"]),
-                f"<= {TARGET_RETRAIN_S:.0f} s",
-                verdict(a["median_s"], TARGET_RETRAIN_S),
-            )
-        )
+        name = f"retrain fast: train_on_set, run x{a['copies']} ({a['crops']:,} crops)"
+        rows.append(timing_row(name, a, TARGET_RETRAIN_S))
     rt = result["retune"]
     if "skipped" in rt:
         rows.append(("re-run one unit model (RunTuner.retune)", "skipped", "", "", ""))
     else:
         for row in rt["runs"]:
-            rows.append(
-                (
-                    f"re-run unit model + mesh: run {row['run']} ({row['type']}, "
-                    f"{row['units']} units, {row['points']:,} pts)",
-                    ms(row["median_s"]),
-                    ms(row["max_s"]),
-                    f"< {1000 * TARGET_RETUNE_S:.0f} ms",
-                    verdict(row["median_s"], TARGET_RETUNE_S, strict=True),
-                )
+            name = (
+                f"re-run unit model + mesh: run {row['run']} ({row['type']}, "
+                f"{row['units']} units, {row['points']:,} pts)"
             )
+            rows.append(timing_row(name, row, TARGET_RETUNE_S, strict=True))
     width = max(len(row[0]) for row in rows)
     header = ("measure", "median", "max", "target", "")
     print(f"{header[0]:<{width}} {header[1]:>9} {header[2]:>9} {header[3]:>12} {header[4]}")

@@ -389,7 +389,7 @@ class ReviewScene:
             self._tune_text = gui.add_markdown("")
             apply = gui.add_button("Apply to the whole drive")
 
-        self._run_choice.on_update(lambda _: self._on_run_chosen())
+        self._run_choice.on_update(lambda _: self._schedule_tune())
         apply.on_click(lambda _: self.apply_tuning())
 
     def _show_selection(self) -> None:
@@ -449,9 +449,6 @@ class ReviewScene:
     def _chosen_run(self) -> int | None:
         value = self._run_choice.value
         return None if value == "none" else int(value.split()[1])
-
-    def _on_run_chosen(self) -> None:
-        self._schedule_tune()
 
     def _schedule_tune(self) -> None:
         if self._quiet_sliders:
