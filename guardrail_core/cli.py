@@ -306,6 +306,34 @@ def _add_reconstruction_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_import_commands(sub: argparse._SubParsersAction) -> None:
+    """``guardrail import las|kitti``: data from elsewhere into an ordinary drive folder."""
+    imp = sub.add_parser(
+        "import",
+        help="import a LAS/LAZ mobile-mapping delivery or KITTI scans as a drive folder",
+        description="Turn data recorded elsewhere into a drive folder that every other command "
+        "reads.",
+    )
+    sources = imp.add_subparsers(dest="source", required=True, metavar="SOURCE")
+    _add_import_las(sources)
+    _add_import_kitti(sources)
+
+
+def _add_import_las(sources: argparse._SubParsersAction) -> None:
+    """``guardrail import las``: a LAS/LAZ delivery (points, trajectory, images, calibration)."""
+    # Filled by the LAS importer.
+
+
+def _add_import_kitti(sources: argparse._SubParsersAction) -> None:
+    """``guardrail import kitti``: frames of a KITTI odometry sequence."""
+    # Filled by the KITTI importer.
+
+
+def _add_export_command(sub: argparse._SubParsersAction) -> None:
+    """``guardrail export RUN_DIR --las OUT.laz``: the drive's points with the run's result."""
+    # Filled by the LAS export.
+
+
 def _add_plugin_commands(sub: argparse._SubParsersAction) -> None:
     """Commands other packages register under the ``guardrail.commands`` entry points (the
     review app's ``serve``): the library never imports the app, the app plugs into the CLI."""
@@ -465,6 +493,8 @@ def build_parser() -> argparse.ArgumentParser:
     reconstruct.add_argument("--quiet", action="store_true", help="no progress bars")
     reconstruct.set_defaults(func=_reconstruct)
 
+    _add_import_commands(sub)
+    _add_export_command(sub)
     _add_plugin_commands(sub)
 
     demo = sub.add_parser(

@@ -79,3 +79,37 @@ class ReconstructionError(GuardrailError):
 class LabelStoreError(GuardrailError):
     """An operators' label store cannot be opened or used (not a label store, a newer schema
     version, made for another number of points, or closed)."""
+
+
+class ImportSourceError(GuardrailError):
+    """Data brought from elsewhere (a LAS delivery, a KITTI sequence) cannot be imported: a file
+    is missing or malformed, or its parts do not fit together."""
+
+
+class MissingSourceFileError(ImportSourceError):
+    """A file the import needs is absent (a KITTI ``calib.txt``, a scan, a trajectory, an image)."""
+
+
+class SourceFormatError(ImportSourceError):
+    """A source file exists but cannot be read as its format requires (columns, keys, numbers)."""
+
+
+class MissingGpsTimeError(ImportSourceError):
+    """A LAS/LAZ point cloud has no ``gps_time``, so its points cannot be placed on the
+    trajectory or the scan lattice."""
+
+
+class TrajectoryCoverageError(ImportSourceError):
+    """The trajectory does not cover the times of the points or images to import."""
+
+
+class MissingCalibrationError(ImportSourceError):
+    """Images were given without a calibration for their camera."""
+
+
+class FrameRangeError(ImportSourceError):
+    """Frames asked for are not in the sequence (or the frame list is malformed)."""
+
+
+class ExportError(GuardrailError):
+    """A run cannot be exported as asked (a mismatched drive, an output that exists)."""
