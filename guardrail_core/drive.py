@@ -43,7 +43,7 @@ from guardrail_core.scanner_model import ScannerParams
 from guardrail_core.trajectory import Trajectory
 
 FORMAT_NAME = "guardrail-drive"
-FORMAT_VERSION = "1.0"
+FORMAT_VERSION = "1.1"
 TRAJECTORY_COLUMNS = ("time", "x", "y", "z", "roll", "pitch", "yaw")
 
 

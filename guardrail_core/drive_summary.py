@@ -8,6 +8,20 @@ import numpy as np
 
 from guardrail_core.classes import GUARDRAIL_CLASSES, TruthClass
 from guardrail_core.drive import Drive
+from guardrail_core.scanner_model import MULTIBEAM
+
+
+def _scanner_line(drive: Drive) -> str:
+    scanner = drive.scanner
+    if scanner.kind == MULTIBEAM:
+        return (
+            f"a multi-beam scanner: {scanner.rings} rings x {scanner.points_per_rotation} azimuth "
+            f"bins, {scanner.rotations_per_second:g} turns/s"
+        )
+    return (
+        f"{scanner.rotations_per_second:g} rotations/s x {scanner.points_per_rotation} phases "
+        f"({scanner.measurements_per_second:,.0f} pulses/s)"
+    )
 
 
 def describe_drive(drive: Drive) -> str:
@@ -22,8 +36,7 @@ def describe_drive(drive: Drive) -> str:
         f"CRS        {drive.crs}, local origin {', '.join(f'{v:.3f}' for v in drive.origin)}",
         f"trajectory {length:.1f} m in {duration:.1f} s ({length / max(duration, 1e-9):.1f} m/s mean), "
         f"{len(traj)} poses",
-        f"points     {len(points):,} from {drive.scanner.rotations_per_second:g} rotations/s x "
-        f"{drive.scanner.points_per_rotation} phases ({drive.scanner.measurements_per_second:,.0f} pulses/s)",
+        f"points     {len(points):,} from {_scanner_line(drive)}",
         f"images     {len(drive.images)}: "
         + ", ".join(
             f"{name} {n} ({drive.cameras[name].width}x{drive.cameras[name].height})"

@@ -58,3 +58,13 @@ def invert_transform(t: np.ndarray) -> np.ndarray:
 def transform_points(t: np.ndarray, points: np.ndarray) -> np.ndarray:
     """Apply a 4x4 transform to points (N, 3)."""
     return points @ t[:3, :3].T + t[:3, 3]
+
+
+def euler_from_rotation(rotation: np.ndarray) -> np.ndarray:
+    """(roll, pitch, yaw) radians (..., 3) of rotations (..., 3, 3): the inverse of
+    :func:`rotation_from_euler` for pitch within (-pi/2, pi/2)."""
+    r = np.asarray(rotation, np.float64)
+    roll = np.arctan2(r[..., 2, 1], r[..., 2, 2])
+    pitch = -np.arcsin(np.clip(r[..., 2, 0], -1.0, 1.0))
+    yaw = np.arctan2(r[..., 1, 0], r[..., 0, 0])
+    return np.stack([roll, pitch, yaw], axis=-1)

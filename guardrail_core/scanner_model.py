@@ -6,6 +6,11 @@ at ``t0 + k / measurements_per_second``; it lies on rotation ``k // points_per_r
 ``k % points_per_rotation``. The (rotation, phase) pair places every point on a 2D lattice whose
 neighbours are neighbours on the object, which §3.1 turns into a wireframe.
 
+A spinning multi-beam scanner (a Velodyne, as in KITTI) has a lattice too: ring x azimuth. Its
+points carry no per-pulse index that a GPS time could give, so its importer stores the lattice with
+the points: ``rotation`` = the frame's block of rows plus the ring (rings ordered by elevation),
+``phase`` = the azimuth bin, ``points_per_rotation`` azimuth bins per turn.
+
 References
 ----------
 Matsumoto et al. 2019, §3.1; Kohira & Masuda 2017 (lattice from GPS time and scanner parameters).
@@ -19,6 +24,24 @@ import numpy as np
 
 from guardrail_core.errors import DriveFormatError
 from guardrail_core.geometry import make_transform, rotation_from_euler
+
+#: Scanner kinds: a profile scanner (one beam, a mirror turning across the road) and a spinning
+#: multi-beam scanner (rings of beams turning about the vertical).
+PROFILE = "profile"
+MULTIBEAM = "multibeam"
+SCANNER_KINDS = (PROFILE, MULTIBEAM)
+#: Azimuth bins per turn of a multi-beam scanner's lattice: twice the ~2000 firings per turn of a
+#: Velodyne HDL-64E at 10 Hz, so two points of a ring rarely share a bin; the wireframe's reach
+#: bridges the empty bins between them.
+AZIMUTH_BINS = 4096
+
+
+def azimuth_phase(direction: np.ndarray, bins: int = AZIMUTH_BINS) -> np.ndarray:
+    """(N,) int64 azimuth bin in ``[0, bins)`` of sensor-frame directions or points (N, 3):
+    the phase of a multi-beam scanner's lattice; bin 0 starts at azimuth -pi (straight back)."""
+    azimuth = np.arctan2(direction[:, 1], direction[:, 0])
+    return np.clip(np.floor((azimuth + np.pi) / (2 * np.pi) * bins), 0, bins - 1).astype(np.int64)
+
 
 #: Default mounting: on the roof at the rear, the rotation axis tilted 45 degrees up from the
 #: driving direction so that scan lines cross vertical roadside planes obliquely, as on the
@@ -52,6 +75,9 @@ class ScannerParams:
     T_vehicle_scanner : (4, 4) float64
         Scanner frame to vehicle frame. In the scanner frame the mirror turns about +x and the beam
         of phase p points along ``(0, cos a, sin a)`` with ``a = 2 pi p / points_per_rotation``.
+    kind : str, :data:`PROFILE` or :data:`MULTIBEAM`
+    rings : int, beams of a multi-beam scanner (0 for a profile scanner). Its lattice rows are
+        rings and its phases azimuth bins; the lattice is stored with the points.
     """
 
     rotations_per_second: float = 100.0
@@ -61,8 +87,18 @@ class ScannerParams:
     min_range_m: float = 1.5
     max_range_m: float = 120.0
     T_vehicle_scanner: np.ndarray = field(default_factory=scanner_mounting)
+    kind: str = PROFILE
+    rings: int = 0
 
     def __post_init__(self) -> None:
+        if self.kind not in SCANNER_KINDS:
+            raise DriveFormatError(
+                f"scanner: kind must be one of {', '.join(SCANNER_KINDS)}, got {self.kind!r}"
+            )
+        if self.kind == MULTIBEAM and self.rings < 1:
+            raise DriveFormatError(
+                f"scanner: a multi-beam scanner needs rings >= 1, got {self.rings}"
+            )
         ratio = self.measurements_per_second / self.rotations_per_second
         if self.rotations_per_second <= 0 or abs(ratio - round(ratio)) > 1e-9 or ratio < 1:
             raise DriveFormatError(
@@ -88,7 +124,17 @@ class ScannerParams:
         -------
         rotation : (N,) int64, the mirror rotation the point was measured on
         phase : (N,) int64, the pulse number within that rotation, in [0, points_per_rotation)
+
+        Raises
+        ------
+        DriveFormatError
+            A multi-beam scanner: its lattice cannot follow from time and must be stored.
         """
+        if self.kind != PROFILE:
+            raise DriveFormatError(
+                f"scanner: the lattice of a {self.kind} scanner does not follow from GPS time; "
+                "its point cloud must store the rotation and phase dimensions"
+            )
         k = self.measurement_index(gps_time)
         return np.divmod(k, self.points_per_rotation)
 
@@ -98,7 +144,16 @@ class ScannerParams:
         return self.t0 + k / self.measurements_per_second
 
     def to_json(self) -> dict:
+        if self.kind == MULTIBEAM:
+            beams = (
+                "multi-beam: rotation = frame block + ring (by elevation), phase = azimuth bin of "
+                "points_per_rotation per turn; stored with the points"
+            )
+        else:
+            beams = "scanner frame (0, cos a, sin a), a = 2 pi phase / points_per_rotation"
         return {
+            "kind": self.kind,
+            "rings": self.rings,
             "rotations_per_second": self.rotations_per_second,
             "measurements_per_second": self.measurements_per_second,
             "t0": self.t0,
@@ -106,7 +161,7 @@ class ScannerParams:
             "min_range_m": self.min_range_m,
             "max_range_m": self.max_range_m,
             "T_vehicle_scanner": np.asarray(self.T_vehicle_scanner).tolist(),
-            "beam_direction": "scanner frame (0, cos a, sin a), a = 2 pi phase / points_per_rotation",
+            "beam_direction": beams,
         }
 
     @classmethod
@@ -123,6 +178,8 @@ class ScannerParams:
                 min_range_m=float(data.get("min_range_m", 0.0)),
                 max_range_m=float(data.get("max_range_m", np.inf)),
                 T_vehicle_scanner=transform,
+                kind=str(data.get("kind", PROFILE)),
+                rings=int(data.get("rings", 0)),
             )
         except KeyError as exc:
             raise DriveFormatError(f"drive.json: scanner lacks the key {exc.args[0]!r}") from exc

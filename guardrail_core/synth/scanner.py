@@ -62,6 +62,56 @@ class Scan:
     face: np.ndarray
 
 
+def measure_returns(
+    raycaster: SceneRaycaster,
+    origin: np.ndarray,
+    direction: np.ndarray,
+    scanner: ScannerParams,
+    returns: ReturnModel,
+    rng: np.random.Generator,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Fire pulses and keep the returns a scanner would record.
+
+    Parameters
+    ----------
+    origin, direction : (M, 3) float64, the pulses' origins (metres, local frame) and unit
+        directions
+    scanner : its range limits and range noise
+    returns : how surfaces answer (dropout, intensity)
+
+    Returns
+    -------
+    index : (K,) int64, the pulses that returned
+    xyz : (K, 3) float64, metres, the measured points (range noise along the beam)
+    intensity : (K,) uint16
+    face : (K,) int64, the scene face hit (the truth)
+    """
+    hits = raycaster.cast(origin, direction)
+    ok = hits.hit & (hits.t >= scanner.min_range_m) & (hits.t <= scanner.max_range_m)
+    idx = np.flatnonzero(ok)
+    face = hits.face[idx]
+    rng_m = hits.t[idx]
+    cos_inc = np.abs(np.einsum("ij,ij->i", hits.normal[idx], direction[idx]))
+    material = raycaster.mesh.face_material[face]
+    range_factor = np.minimum(1.0, (returns.range_knee_m / rng_m) ** 2)
+    signal = _REFLECTIVITY[material] * cos_inc * range_factor
+    p_drop = (
+        returns.base_dropout
+        + _DROPOUT[material]
+        + np.clip(1 - signal / returns.weak_signal, 0, 1) * 0.9
+    )
+    kept = rng.random(len(idx)) >= np.clip(p_drop, 0.0, 1.0)
+    idx, face, rng_m, signal = idx[kept], face[kept], rng_m[kept], signal[kept]
+    measured = rng_m + rng.normal(0.0, scanner.range_noise_m, len(idx))
+    xyz = origin[idx] + direction[idx] * measured[:, None]
+    # Intensity: square root compresses the dynamic range the way scanners report it.
+    level = np.sqrt(np.clip(signal, 0, 1)) * (
+        1 + returns.intensity_noise * rng.standard_normal(len(idx))
+    )
+    intensity = np.clip(level * 65535, 0, 65535).astype(np.uint16)
+    return idx, xyz, intensity, face
+
+
 def scan(
     raycaster: SceneRaycaster,
     trajectory: Trajectory,
@@ -99,29 +149,9 @@ def scan(
         phase = k % ppr
         origin = pos_wv + rot_wv @ mount_t
         direction = np.einsum("nij,nj->ni", rot_wv, beam_vehicle[phase])
-        hits = raycaster.cast(origin, direction)
-        ok = hits.hit & (hits.t >= scanner.min_range_m) & (hits.t <= scanner.max_range_m)
-        idx = np.flatnonzero(ok)
-        face = hits.face[idx]
-        rng_m = hits.t[idx]
-        cos_inc = np.abs(np.einsum("ij,ij->i", hits.normal[idx], direction[idx]))
-        material = raycaster.mesh.face_material[face]
-        range_factor = np.minimum(1.0, (returns.range_knee_m / rng_m) ** 2)
-        signal = _REFLECTIVITY[material] * cos_inc * range_factor
-        p_drop = (
-            returns.base_dropout
-            + _DROPOUT[material]
-            + np.clip(1 - signal / returns.weak_signal, 0, 1) * 0.9
+        idx, xyz, intensity, face = measure_returns(
+            raycaster, origin, direction, scanner, returns, rng
         )
-        kept = rng.random(len(idx)) >= np.clip(p_drop, 0.0, 1.0)
-        idx, face, rng_m, signal = idx[kept], face[kept], rng_m[kept], signal[kept]
-        measured = rng_m + rng.normal(0.0, scanner.range_noise_m, len(idx))
-        xyz = origin[idx] + direction[idx] * measured[:, None]
-        # Intensity: square root compresses the dynamic range the way scanners report it.
-        level = np.sqrt(np.clip(signal, 0, 1)) * (
-            1 + returns.intensity_noise * rng.standard_normal(len(idx))
-        )
-        intensity = np.clip(level * 65535, 0, 65535).astype(np.uint16)
         parts.append((xyz, t[idx], intensity, k[idx] // ppr, phase[idx], face))
         if progress is not None:
             progress(r1 - r0)

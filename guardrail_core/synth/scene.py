@@ -18,8 +18,11 @@ import yaml
 
 from guardrail_core.errors import DriveFormatError, SceneSpecError
 from guardrail_core.scanner_model import (
+    AZIMUTH_BINS,
     DEFAULT_MOUNT_POSITION_M,
     DEFAULT_MOUNT_RPY_DEG,
+    MULTIBEAM,
+    PROFILE,
     ScannerParams,
     scanner_mounting,
 )
@@ -28,6 +31,7 @@ from guardrail_core.synth.designs import list_designs, load_design
 from guardrail_core.synth.guardrail import build_guardrail_run
 from guardrail_core.synth.materials import PAINTS
 from guardrail_core.synth.mesh import MeshBuilder, SceneMesh
+from guardrail_core.synth.multibeam import MultibeamParams
 from guardrail_core.synth.road import SIDES, Road, RoadSpec
 from guardrail_core.synth.vehicle import VehicleParams
 
@@ -48,6 +52,7 @@ class Scene:
     road : Road
     vehicle : VehicleParams
     scanner : ScannerParams, the scanner on the vehicle (``t0`` set when the drive starts)
+    multibeam : MultibeamParams for a multi-beam scanner (its beams and frame spacing), else None
     drive_span : (s_start, s_end) metres along the road that the vehicle drives
     mesh : SceneMesh, every surface with its truth
     objects : list of dict, truth records (``truth/objects.json``)
@@ -63,6 +68,7 @@ class Scene:
     objects: list[dict]
     crs: str
     origin: np.ndarray
+    multibeam: MultibeamParams | None = None
 
 
 # ----------------------------------------------------------------------------- reading specs
@@ -181,11 +187,43 @@ def _vehicle(data: dict, road: Road) -> tuple[VehicleParams, tuple[float, float]
     return params, (start, end)
 
 
-def _scanner(data: object) -> ScannerParams:
-    """The optional ``scanner`` section: rates, noise and mounting (RIEGL VQ-250 defaults)."""
+#: The KITTI car's Velodyne: 1.73 m above the road, level.
+MULTIBEAM_HEIGHT_M = 1.73
+
+
+def _scanner(
+    data: object, reference_height_m: float
+) -> tuple[ScannerParams, MultibeamParams | None]:
+    """The optional ``scanner`` section: a profile scanner's rates, noise and mounting (RIEGL
+    VQ-250 defaults), or ``kind: multibeam``, a Velodyne HDL-64E taking one frame every
+    ``frame_every_m`` metres (default 60), level at ``height_m`` (1.73) above the road."""
     if not isinstance(data, dict):
         raise SceneSpecError("scanner: expected a mapping")
     where = "scanner"
+    kind = _get(data, "kind", str, where, PROFILE)
+    if kind == MULTIBEAM:
+        frame_every = _get(data, "frame_every_m", float, where, MultibeamParams.frame_every_m)
+        height = _get(data, "height_m", float, where, MULTIBEAM_HEIGHT_M)
+        if not frame_every > 0 or not height > 0:
+            raise SceneSpecError(
+                f"scanner: frame_every_m and height_m must be positive, got {frame_every} and "
+                f"{height}"
+            )
+        mount = scanner_mounting((0.0, 0.0, height - reference_height_m), 0.0, 0.0, 0.0)
+        params = MultibeamParams(frame_every_m=frame_every)
+        scanner = ScannerParams(
+            rotations_per_second=10.0,
+            measurements_per_second=10.0 * AZIMUTH_BINS,
+            range_noise_m=_get(data, "range_noise_m", float, where, 0.02),
+            min_range_m=2.5,  # the car's own body
+            max_range_m=_get(data, "max_range_m", float, where, 120.0),
+            T_vehicle_scanner=mount,
+            kind=MULTIBEAM,
+            rings=len(params.elevations_deg),
+        )
+        return scanner, params
+    if kind != PROFILE:
+        raise SceneSpecError(f"scanner.kind: expected {PROFILE} or {MULTIBEAM}, got {kind!r}")
     mount = _get(data, "mounting", dict, where, {})
     position = _get(mount, "position_m", list, "scanner.mounting", list(DEFAULT_MOUNT_POSITION_M))
     if len(position) != 3 or not all(isinstance(v, int | float) for v in position):
@@ -213,7 +251,7 @@ def _scanner(data: object) -> ScannerParams:
                 ),
                 yaw_deg=_get(mount, "yaw_deg", float, "scanner.mounting", DEFAULT_MOUNT_RPY_DEG[2]),
             ),
-        )
+        ), None
     except DriveFormatError as exc:
         raise SceneSpecError(str(exc)) from exc
 
@@ -245,7 +283,7 @@ def build_scene(spec: dict, *, seed: int = 0) -> Scene:
     rng = np.random.default_rng(seed)
     road = Road(_road_spec(spec.get("road")))
     vehicle, span = _vehicle(spec.get("vehicle") or {}, road)
-    scanner = _scanner(spec.get("scanner") or {})
+    scanner, multibeam = _scanner(spec.get("scanner") or {}, vehicle.reference_height_m)
     builder = MeshBuilder()
     road.build_mesh(builder)
     objects: list[dict] = []
@@ -330,6 +368,7 @@ def build_scene(spec: dict, *, seed: int = 0) -> Scene:
         objects=objects,
         crs=str(spec.get("crs", DEFAULT_CRS)),
         origin=origin,
+        multibeam=multibeam,
     )
 
 

@@ -26,6 +26,7 @@ from guardrail_core.drive import (
 from guardrail_core.errors import InvalidOptionError, MissingDriveFileError
 from guardrail_core.synth.camera_render import random_lighting, render_image
 from guardrail_core.synth.camera_rig import default_camera_rig
+from guardrail_core.synth.multibeam import scan_frames
 from guardrail_core.synth.raycast import SceneRaycaster
 from guardrail_core.synth.scanner import scan
 from guardrail_core.synth.scene import Scene, build_scene
@@ -112,13 +113,28 @@ def simulate_drive(
         )
         scanner = dataclasses.replace(scene.scanner, t0=float(trajectory.time[0]))
         raycaster = SceneRaycaster(scene.mesh)
-        n_rot = int((trajectory.time[-1] - trajectory.time[0]) * scanner.rotations_per_second)
-        with tqdm(
-            total=n_rot, desc="scanning", unit="rot", disable=not progress, leave=False
-        ) as bar:
-            result = scan(
-                raycaster, trajectory, scanner, np.random.default_rng(scan_seq), progress=bar.update
-            )
+        if scene.multibeam is not None:
+            with tqdm(desc="scanning", unit="frame", disable=not progress, leave=False) as bar:
+                result = scan_frames(
+                    raycaster,
+                    trajectory,
+                    scanner,
+                    scene.multibeam,
+                    np.random.default_rng(scan_seq),
+                    progress=bar.update,
+                )
+        else:
+            n_rot = int((trajectory.time[-1] - trajectory.time[0]) * scanner.rotations_per_second)
+            with tqdm(
+                total=n_rot, desc="scanning", unit="rot", disable=not progress, leave=False
+            ) as bar:
+                result = scan(
+                    raycaster,
+                    trajectory,
+                    scanner,
+                    np.random.default_rng(scan_seq),
+                    progress=bar.update,
+                )
         points = PointCloud(
             result.xyz, result.gps_time, result.intensity, result.rotation, result.phase
         )

@@ -1,0 +1,1 @@
+"""Importers: data recorded elsewhere (LAS/LAZ deliveries, KITTI scans) as drive folders."""
