@@ -40,6 +40,10 @@ def _simulate(args: argparse.Namespace) -> int:
         spec = random_scene_spec(
             args.seed, args.length if args.length is not None else 100.0, designs=designs
         )
+    if args.scanner:
+        spec["scanner"] = {**(spec.get("scanner") or {}), "kind": args.scanner}
+        if args.frame_every is not None:
+            spec["scanner"]["frame_every_m"] = args.frame_every
     options = SimulationOptions(
         image_every_m=args.image_every, image_size=args.image_size, compress=not args.las
     )
@@ -132,10 +136,12 @@ def _held_out_report(info: dict) -> str:
 
 def _process(args: argparse.Namespace) -> int:
     from guardrail_core.drive import load_drive
-    from guardrail_core.extract.model_store import load_model
+    from guardrail_core.extract.model_store import DEFAULT_MODEL_DIR, load_model
     from guardrail_core.pipeline import process_drive
 
-    model = load_model(args.model)
+    model = load_model(args.model or DEFAULT_MODEL_DIR)
+    if args.model is None:
+        print(f"model: the default model shipped with guardrail ({model.version})")
     drive = load_drive(args.drive, with_truth=False)
     info = process_drive(drive, model, args.out, overwrite=args.overwrite, progress=not args.quiet)
     counts = info["counts"]
@@ -149,10 +155,14 @@ def _process(args: argparse.Namespace) -> int:
         f"{crops['too_small']} too small to crop"
     )
     if crops["ok"] == 0 and counts["segments"]:
-        print(
-            "warning: no segment has a usable image, so nothing could be classified",
-            file=sys.stderr,
-        )
+        if model.segment_head is not None:
+            print("note: no segment has a usable image: all were classified by their geometry")
+        else:
+            print(
+                "warning: no segment has a usable image, and this model classifies crops only, "
+                "so nothing could be classified",
+                file=sys.stderr,
+            )
     print(
         f"guardrail segments: {counts['guardrail_segments_raw']} raw, "
         f"{counts['guardrail_segments']} after label correction "
@@ -306,6 +316,16 @@ def _add_reconstruction_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _export(args: argparse.Namespace) -> int:
+    from guardrail_core.io.las_export import export_run_las, format_summary
+
+    summary = export_run_las(args.run_dir, args.las, drive_dir=args.drive, overwrite=args.overwrite)
+    for line in summary.warnings:
+        print(f"warning: {line}", file=sys.stderr)
+    print(format_summary(summary))
+    return 0
+
+
 def _add_import_commands(sub: argparse._SubParsersAction) -> None:
     """``guardrail import las|kitti``: data from elsewhere into an ordinary drive folder."""
     imp = sub.add_parser(
@@ -321,17 +341,196 @@ def _add_import_commands(sub: argparse._SubParsersAction) -> None:
 
 def _add_import_las(sources: argparse._SubParsersAction) -> None:
     """``guardrail import las``: a LAS/LAZ delivery (points, trajectory, images, calibration)."""
-    # Filled by the LAS importer.
+    from guardrail_core.importers.las_delivery import DEFAULT_REFERENCE_HEIGHT_M
+
+    las = sources.add_parser(
+        "las",
+        help="a LAS/LAZ delivery: points with GPS time, trajectory, images and calibration",
+        description="Turn a mobile-mapping delivery into a drive folder: LAS/LAZ points (any "
+        "point format with gps_time, map coordinates), a trajectory CSV (time, x, y, z, roll, "
+        "pitch, yaw), optionally an image list CSV (file, camera, gps_time) with the cameras' "
+        "calibration (OpenCV YAML or JSON), and the scanner's rates for the scan lattice. "
+        "Formats: docs/import.md.",
+    )
+    las.add_argument("points", type=Path, nargs="+", metavar="POINTS", help="LAS/LAZ file(s)")
+    las.add_argument("--trajectory", type=Path, required=True, metavar="CSV", help="trajectory CSV")
+    las.add_argument("--out", type=Path, required=True, help="drive folder to write")
+    las.add_argument(
+        "--trajectory-degrees",
+        action="store_true",
+        help="the trajectory's roll, pitch, yaw are in degrees (default radians)",
+    )
+    las.add_argument(
+        "--reference-height",
+        type=float,
+        default=DEFAULT_REFERENCE_HEIGHT_M,
+        metavar="METRES",
+        help="height of the trajectory's reference point above the road "
+        f"(default {DEFAULT_REFERENCE_HEIGHT_M})",
+    )
+    las.add_argument("--images", type=Path, metavar="CSV", help="image list: file,camera,gps_time")
+    las.add_argument(
+        "--calibration",
+        type=Path,
+        nargs="+",
+        action="extend",
+        metavar="FILE",
+        help="camera calibration: OpenCV YAML (cv2.FileStorage), YAML or JSON; one file per "
+        "camera or one for several",
+    )
+    las.add_argument(
+        "--scanner",
+        type=Path,
+        metavar="FILE",
+        help="scanner parameters, JSON or YAML with the keys of drive.json's scanner block",
+    )
+    las.add_argument("--rotations-per-second", type=float, metavar="HZ", help="mirror rotations")
+    las.add_argument("--measurements-per-second", type=float, metavar="HZ", help="pulse rate")
+    las.add_argument(
+        "--t0",
+        type=float,
+        metavar="SECONDS",
+        help="GPS time of pulse 0, the lattice's epoch (default: the first point's whole second)",
+    )
+    las.add_argument(
+        "--scanner-mount",
+        metavar="NUMBERS",
+        help="T_vehicle_scanner: x,y,z,roll,pitch,yaw (metres, degrees) or 16 numbers of the "
+        "4x4 matrix, row by row; write --scanner-mount=-0.6,... when it starts with a minus "
+        "(default: the simulator's mount)",
+    )
+    las.add_argument(
+        "--crs",
+        help="map CRS, e.g. EPSG:6677 (default: the one the LAS file declares, else 'unknown'); "
+        "replaces the file's",
+    )
+    las.add_argument(
+        "--las", action="store_true", help="write uncompressed points.las instead of points.laz"
+    )
+    las.add_argument("--overwrite", action="store_true", help="replace OUT if it exists")
+    las.add_argument("--quiet", action="store_true", help="no progress bars")
+    las.set_defaults(func=_import_las)
+
+
+def _import_las(args: argparse.Namespace) -> int:
+    from guardrail_core.drive import load_drive
+    from guardrail_core.drive_summary import describe_drive
+    from guardrail_core.importers.las_delivery import import_las_delivery, read_scanner_file
+
+    # Options override the scanner file's values, one by one.
+    fields = read_scanner_file(args.scanner) if args.scanner else {}
+    for key, value in (
+        ("rotations_per_second", args.rotations_per_second),
+        ("measurements_per_second", args.measurements_per_second),
+        ("t0", args.t0),
+        ("T_vehicle_scanner", args.scanner_mount),
+    ):
+        if value is not None:
+            fields[key] = value
+    result = import_las_delivery(
+        args.points,
+        args.trajectory,
+        args.out,
+        scanner=fields,
+        images_csv=args.images,
+        calibration=args.calibration,
+        crs=args.crs,
+        reference_height_m=args.reference_height,
+        trajectory_degrees=args.trajectory_degrees,
+        compress=not args.las,
+        overwrite=args.overwrite,
+        progress=not args.quiet,
+    )
+    for note in result.notes:
+        print(f"note: {note}", file=sys.stderr)
+    crs_from = "none declared" if result.crs_from == "none" else f"from the {result.crs_from}"
+    print(
+        f"imported {result.n_points:,} points and {result.n_images} images into {result.out} "
+        f"(CRS {result.crs}, {crs_from}; scanner t0 {result.scanner.t0:.6f} s)"
+    )
+    print(describe_drive(load_drive(result.out)))
+    return 0
+
+
+def _import_kitti(args: argparse.Namespace) -> int:
+    from guardrail_core.drive import load_drive
+    from guardrail_core.drive_summary import describe_drive
+    from guardrail_core.importers.kitti import import_kitti, parse_frames
+
+    frames = parse_frames(args.frames) if args.frames else None
+    result = import_kitti(
+        args.sequence_dir,
+        args.out,
+        frames=frames,
+        sensor_height_m=args.sensor_height,
+        overwrite=args.overwrite,
+        progress=not args.quiet,
+    )
+    print(
+        f"imported {len(result.frames)} frames ({result.n_points:,} points, {result.rings} rings, "
+        f"{result.n_images} images) into {result.out}"
+    )
+    print(describe_drive(load_drive(result.out)))
+    return 0
 
 
 def _add_import_kitti(sources: argparse._SubParsersAction) -> None:
     """``guardrail import kitti``: frames of a KITTI odometry sequence."""
-    # Filled by the KITTI importer.
+    from guardrail_core.importers.kitti import KITTI_SENSOR_HEIGHT_M
+
+    kitti = sources.add_parser(
+        "kitti",
+        help="frames of a KITTI odometry sequence, merged with their poses",
+        description="Merge frames of a KITTI odometry sequence folder (velodyne/NNNNNN.bin, "
+        "calib.txt, poses.txt, times.txt, optional image_2/) into a drive folder: points in "
+        "the world of the sequence's frame 0, the scan lattice as ring x azimuth (rings "
+        "recovered from the point order and elevation), the trajectory from the poses, "
+        "image_2 as a calibrated camera.",
+    )
+    kitti.add_argument("sequence_dir", type=Path, metavar="SEQUENCE_DIR")
+    kitti.add_argument(
+        "--frames",
+        metavar="LIST",
+        help="frames to merge: 280,281 or 270-290 or a mix (default: every frame with a scan)",
+    )
+    kitti.add_argument("--out", type=Path, required=True, help="drive folder to write")
+    kitti.add_argument(
+        "--sensor-height",
+        type=float,
+        default=KITTI_SENSOR_HEIGHT_M,
+        metavar="METRES",
+        help=f"the scanner's height above the road (default {KITTI_SENSOR_HEIGHT_M}, KITTI's car)",
+    )
+    kitti.add_argument("--overwrite", action="store_true", help="replace OUT if it exists")
+    kitti.add_argument("--quiet", action="store_true", help="no progress bars")
+    kitti.set_defaults(func=_import_kitti)
 
 
 def _add_export_command(sub: argparse._SubParsersAction) -> None:
     """``guardrail export RUN_DIR --las OUT.laz``: the drive's points with the run's result."""
-    # Filled by the LAS export.
+    export = sub.add_parser(
+        "export",
+        help="write a run's result onto the drive's points as LAS/LAZ for GIS tools",
+        description="Write every point of the run's drive in map coordinates (LAS 1.4, the "
+        "drive's CRS) with the run's result: class 64 guardrail, 65 guardrail pole, 11 road "
+        "surface (where the drive left points unclassified), and the extra dimensions "
+        "segment_id, guardrail_probability and run_id. See docs/run-folder.md.",
+    )
+    export.add_argument(
+        "run_dir", type=Path, metavar="RUN_DIR", help="run folder (guardrail process)"
+    )
+    export.add_argument(
+        "--las",
+        type=Path,
+        required=True,
+        metavar="OUT",
+        help="file to write: OUT.laz (compressed) or OUT.las",
+    )
+    export.add_argument(
+        "--drive", type=Path, help="the drive of the run (default: the path in run.json)"
+    )
+    export.add_argument("--overwrite", action="store_true", help="replace OUT if it exists")
+    export.set_defaults(func=_export)
 
 
 def _add_plugin_commands(sub: argparse._SubParsersAction) -> None:
@@ -386,6 +585,18 @@ def build_parser() -> argparse.ArgumentParser:
         default=(1024, 768),
         metavar="WxH",
         help="image size (default 1024x768)",
+    )
+    sim.add_argument(
+        "--scanner",
+        choices=("profile", "multibeam"),
+        help="profile: the RIEGL VQ-250 profile scanner of the paper's vehicle (the default); "
+        "multibeam: a Velodyne HDL-64E as on the KITTI car, one frame every --frame-every metres",
+    )
+    sim.add_argument(
+        "--frame-every",
+        type=float,
+        metavar="METRES",
+        help="with --scanner multibeam: metres between frames (default 60)",
     )
     sim.add_argument(
         "--las", action="store_true", help="write uncompressed points.las instead of points.laz"
@@ -448,7 +659,12 @@ def build_parser() -> argparse.ArgumentParser:
         "image, classify it and correct the labels; write everything into the run folder.",
     )
     process.add_argument("drive", type=Path)
-    process.add_argument("--model", type=Path, required=True, help="model folder (guardrail train)")
+    process.add_argument(
+        "--model",
+        type=Path,
+        help="model folder (guardrail train; default: the model shipped with guardrail, trained "
+        "on simulated drives of a profile and a multi-beam scanner)",
+    )
     process.add_argument("--out", type=Path, required=True, help="run folder to write")
     process.add_argument("--overwrite", action="store_true", help="replace the run folder")
     process.add_argument("--quiet", action="store_true", help="no progress bars")

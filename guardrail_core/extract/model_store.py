@@ -152,6 +152,12 @@ def _read_weights(path: Path) -> dict[str, np.ndarray]:
         raise ModelFormatError(f"{path}: expected an .npz archive of arrays, got {exc}") from exc
 
 
+#: The model shipped with the package: fast mode, trained on simulated drives of both scanners
+#: (the profile scanner with cameras, the multi-beam scanner without); docs/default-model.md
+#: says how to make it again.
+DEFAULT_MODEL_DIR = Path(__file__).resolve().parents[1] / "models" / "default"
+
+
 def load_model(folder: Path) -> GuardrailClassifier:
     """Read a model folder written by :func:`save_model`.
 

@@ -1,0 +1,90 @@
+"""Each classification path's figure on held-out synthetic drives: the crop CNN alone, the
+geometry alone (the segment head with every crop withheld) and the two fused (the segment head
+with the crops, as `guardrail process` runs it).
+
+    .venv/bin/python docs/classification_paths.py --model MODEL_DIR DRIVE [DRIVE ...]
+
+Prints a Markdown table of guardrail recall, precision and F per path and drive kind (profile
+scanner with cameras, multi-beam scanner), before and after label correction, and writes the
+figures as JSON with ``--json``. Segment truth is the majority class of a segment's points, as
+`guardrail evaluate` counts it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+from guardrail_core.drive import load_drive
+from guardrail_core.evaluate import segment_truth
+from guardrail_core.extract.classify import classification_metrics
+from guardrail_core.extract.correct import correct_labels
+from guardrail_core.extract.crops import CROP_OK
+from guardrail_core.extract.model_store import load_model
+from guardrail_core.pipeline import ExtractionParams, extract
+
+PATHS = ("crop CNN alone", "geometry alone", "fused")
+
+
+def path_labels(drive_path: Path, model, params: ExtractionParams) -> tuple[str, dict]:
+    """The drive's kind and, per path, (truth, raw label, corrected label) of every segment."""
+    drive = load_drive(drive_path)
+    result = extract(drive, model.input_size, params)
+    truth = segment_truth(drive.truth.point_class, result.point_segment, len(result.segments))
+    ok = np.flatnonzero(result.choice.status == CROP_OK)
+    crop_proba = np.full(len(result.segments), np.nan)
+    if len(ok):
+        crop_proba[ok] = model.predict_proba(result.crops[ok])
+    withheld = np.full(len(result.segments), np.nan)
+    probability = {
+        # Without a crop the CNN has no answer: the segment counts as not guardrail.
+        "crop CNN alone": np.nan_to_num(crop_proba, nan=0.0),
+        "geometry alone": model.segment_proba(result.features, withheld),
+        "fused": model.segment_proba(result.features, crop_proba),
+    }
+    out = {}
+    for name, p in probability.items():
+        raw = p >= model.threshold
+        out[name] = (truth, raw, correct_labels(raw, result.extents(), params.correction))
+    kind = drive.scanner.kind if drive.images else f"{drive.scanner.kind}, no images"
+    return kind, out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("drives", type=Path, nargs="+")
+    parser.add_argument("--model", type=Path, required=True)
+    parser.add_argument("--json", type=Path, help="write the figures here too")
+    args = parser.parse_args()
+    model = load_model(args.model)
+    pooled: dict[tuple[str, str, str], list[np.ndarray]] = defaultdict(list)
+    for path in args.drives:
+        kind, labels = path_labels(path, model, ExtractionParams())
+        for name, (truth, raw, corrected) in labels.items():
+            pooled[(kind, name, "truth")].append(truth)
+            pooled[(kind, name, "raw")].append(raw)
+            pooled[(kind, name, "corrected")].append(corrected)
+    figures = {}
+    print("| drives | path | segments | recall | precision | F (raw) | F (corrected) |")
+    print("|---|---|---|---|---|---|---|")
+    for kind in sorted({k for k, _, _ in pooled}):
+        for name in PATHS:
+            truth = np.concatenate(pooled[(kind, name, "truth")])
+            raw = classification_metrics(truth, np.concatenate(pooled[(kind, name, "raw")]))
+            fixed = classification_metrics(truth, np.concatenate(pooled[(kind, name, "corrected")]))
+            figures[f"{kind} / {name}"] = {"raw": raw, "corrected": fixed}
+            print(
+                f"| {kind} | {name} | {len(truth)} | {100 * fixed['guardrail']['recall']:.1f}% | "
+                f"{100 * fixed['guardrail']['precision']:.1f}% | {100 * raw['guardrail']['f1']:.1f}% | "
+                f"{100 * fixed['guardrail']['f1']:.1f}% |"
+            )
+    if args.json:
+        args.json.write_text(json.dumps(figures, indent=2, default=float))
+
+
+if __name__ == "__main__":
+    main()

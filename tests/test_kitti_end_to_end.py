@@ -1,0 +1,138 @@
+"""Real KITTI scans through the whole product with the shipped default model: the motorway's
+W-beam guardrail found and reconstructed (sequence 01, frame 280), and the Karlsruhe street's
+image crops cut at the projected points with no guardrail reported (raw 2011_09_26, frame 0).
+
+Frame 280 is unlabelled; the figures come from where its README (and a look at the scan) places
+things in the sensor frame, which is the imported drive's frame: the road at z = -1.72 m, the
+W-beam on the right shoulder at y in [-5.5, -3.5] m with its rail 0.3-0.9 m above the road, the
+median barrier at y in [5.5, 9] m, a far-side guardrail at y ~ 19.5 m.
+"""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from guardrail_core.drive import Drive, load_drive
+from guardrail_core.extract.crops import CROP_OK, CropParams, crop_window, cut_crop
+from guardrail_core.extract.model_store import DEFAULT_MODEL_DIR, load_model
+from guardrail_core.importers.kitti import import_kitti
+from guardrail_core.pipeline import process_drive
+from guardrail_core.run_folder import Run, crop_name, load_run
+from tests.kitti_data import KITTI_RAW, KITTI_SEQ01, require_kitti
+
+ROAD_Z_M = -1.72
+WINDOW_M = 40.0
+
+
+def _process(sequence: Path, frame: int, root: Path) -> tuple[Drive, Run, Path]:
+    import_kitti(sequence, root / "drive", frames=[frame])
+    drive = load_drive(root / "drive")
+    process_drive(drive, load_model(DEFAULT_MODEL_DIR), root / "run")
+    return drive, load_run(root / "run"), root / "run"
+
+
+@pytest.fixture(scope="module")
+def motorway(tmp_path_factory: pytest.TempPathFactory) -> tuple[Drive, Run, Path]:
+    require_kitti(KITTI_SEQ01)
+    return _process(KITTI_SEQ01, 280, tmp_path_factory.mktemp("kitti01"))
+
+
+def _guardrail_points(run: Run) -> np.ndarray:
+    segment = run.point_segment
+    found = np.zeros(len(segment), bool)
+    inside = segment >= 0
+    found[inside] = run.segments["label"][segment[inside]]
+    return found
+
+
+def test_motorway_guardrail_found_along_the_window(motorway) -> None:
+    drive, run, _ = motorway
+    x, y, z = drive.points.xyz.T
+    found = _guardrail_points(run)
+    height = z - ROAD_Z_M
+    window = np.abs(x) < WINDOW_M
+    rail = window & (height > 0.3) & (height < 0.9)
+
+    # The right shoulder's W-beam: guardrail points in >= 85% of the one-metre stretches where
+    # the scan has at least 5 points at rail height.
+    shoulder = rail & (y > -5.5) & (y < -3.5)
+    stretch = np.floor(x + WINDOW_M).astype(np.int64)
+    scanned = np.bincount(stretch[shoulder], minlength=80) >= 5
+    hit = np.bincount(stretch[shoulder & found], minlength=80) > 0
+    assert scanned.sum() >= 40
+    assert hit[scanned].mean() >= 0.85
+
+    # The median barrier: found in most of its four-metre stretches (a post spacing).
+    median = rail & (y > 5.5) & (y < 9.0)
+    block = np.floor((x + WINDOW_M) / 4).astype(np.int64)
+    scanned = np.bincount(block[median], minlength=20) >= 20
+    hit = np.bincount(block[median & found], minlength=20) > 0
+    assert hit[scanned].mean() >= 0.8
+
+    # Few guardrail points anywhere else: not on the road, not in the verges.
+    barriers = ((y > -5.5) & (y < -3.5)) | ((y > 5.5) & (y < 9.0)) | ((y > 18.0) & (y < 21.0))
+    assert np.count_nonzero(found & ~barriers) <= 0.01 * np.count_nonzero(found)
+
+
+def test_motorway_w_beam_reconstructed_with_section_and_posts(motorway) -> None:
+    _, _, run_dir = motorway
+    with (run_dir / "reconstruction" / "inventory.csv").open(newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    shoulder = [
+        r for r in rows if r["status"] == "reconstructed" and -5.5 < float(r["start_y"]) < -3.5
+    ]
+    assert len(shoulder) == 1
+    beam = shoulder[0]
+    assert beam["type"] == "beam" and beam["signature"].startswith("beam h")
+    # The rail's top 0.6-0.85 m above the ground, on posts spaced as motorway posts are.
+    assert 0.6 <= float(beam["rail_top_m"]) <= 0.85
+    assert int(beam["pole_count"]) >= 4
+    assert 1.5 <= float(beam["pole_spacing_m"]) <= 4.5
+    assert float(beam["length_m"]) >= 10.0
+    assert (run_dir / "reconstruction" / "meshes" / f"run_{int(beam['run_id']):03d}.glb").is_file()
+
+
+@pytest.fixture(scope="module")
+def street(tmp_path_factory: pytest.TempPathFactory) -> tuple[Drive, Run, Path]:
+    require_kitti(KITTI_RAW)
+    return _process(KITTI_RAW, 0, tmp_path_factory.mktemp("kitti_raw"))
+
+
+def test_street_reports_no_guardrail(street) -> None:
+    drive, run, run_dir = street
+    with (run_dir / "reconstruction" / "inventory.csv").open(newline="") as handle:
+        assert list(csv.DictReader(handle)) == []
+    # What the segment labels call guardrail is a scatter of tiny far pieces, no run of rail.
+    found = _guardrail_points(run)
+    assert np.count_nonzero(found) <= 0.002 * len(found)
+
+
+def test_street_crops_come_from_the_real_image(street) -> None:
+    drive, run, run_dir = street
+    segments = run.segments
+    ok = np.flatnonzero(segments["crop_status"] == CROP_OK)
+    assert len(ok) >= 20
+    assert set(segments["image"][ok].tolist()) == {0}
+    image = drive.read_image(drive.images[0])
+    top_left, side = crop_window(segments["rect"][ok], CropParams())
+    saved = np.stack([cv2.imread(str(run_dir / crop_name(int(s))))[:, :, ::-1] for s in ok]).astype(
+        np.float64
+    )
+    size = saved.shape[1]
+    cut = np.stack(
+        [cut_crop(image, top_left[i], int(side[i]), size) for i in range(len(ok))]
+    ).astype(np.float64)
+    same = np.abs(saved - cut).mean(axis=(1, 2, 3))
+    # Each saved crop is its window of the real image (up to JPEG), not any other window.
+    other = np.abs(saved - np.roll(cut, 1, axis=0)).mean(axis=(1, 2, 3))
+    assert np.all(same < 6.0)
+    assert np.median(other) > 4 * np.median(same)
+    # The windows hold the segments' projected points: the rectangles lie on the image.
+    rect = segments["rect"][ok]
+    assert np.all((rect[:, 0] >= 0) & (rect[:, 2] < image.shape[1]))
+    assert np.all((rect[:, 1] >= 0) & (rect[:, 3] < image.shape[0]))
