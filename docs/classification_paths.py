@@ -54,6 +54,11 @@ def path_labels(drive_path: Path, model, params: ExtractionParams) -> tuple[str,
     return kind, out
 
 
+def _percent(value: float | None) -> str:
+    """A share as a percentage; a dash where it is undefined (no guardrail called at all)."""
+    return "-" if value is None else f"{100 * value:.1f}%"
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("drives", type=Path, nargs="+")
@@ -78,9 +83,9 @@ def main() -> None:
             fixed = classification_metrics(truth, np.concatenate(pooled[(kind, name, "corrected")]))
             figures[f"{kind} / {name}"] = {"raw": raw, "corrected": fixed}
             print(
-                f"| {kind} | {name} | {len(truth)} | {100 * fixed['guardrail']['recall']:.1f}% | "
-                f"{100 * fixed['guardrail']['precision']:.1f}% | {100 * raw['guardrail']['f1']:.1f}% | "
-                f"{100 * fixed['guardrail']['f1']:.1f}% |"
+                f"| {kind} | {name} | {len(truth)} | {_percent(fixed['guardrail']['recall'])} | "
+                f"{_percent(fixed['guardrail']['precision'])} | {_percent(raw['guardrail']['f1'])} "
+                f"| {_percent(fixed['guardrail']['f1'])} |"
             )
     if args.json:
         args.json.write_text(json.dumps(figures, indent=2, default=float))
