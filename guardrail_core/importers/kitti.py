@@ -47,6 +47,7 @@ from guardrail_core.errors import (
     SourceFormatError,
 )
 from guardrail_core.geometry import euler_from_rotation, invert_transform, make_transform
+from guardrail_core.importers.calibration import require_file
 from guardrail_core.scanner_model import AZIMUTH_BINS, MULTIBEAM, ScannerParams, azimuth_phase
 from guardrail_core.trajectory import Trajectory
 
@@ -113,15 +114,9 @@ class KittiImport:
     rings: int
 
 
-def _require(path: Path, what: str) -> Path:
-    if not path.is_file():
-        raise MissingSourceFileError(f"{path.parent}: {what} {path.name!r} is missing")
-    return path
-
-
 def read_calib(path: Path) -> dict[str, np.ndarray]:
     """``calib.txt``: ``NAME: 12 numbers`` per line -> name -> (3, 4) float64."""
-    _require(path, "KITTI calibration")
+    require_file(path, "KITTI calibration")
     calib = {}
     for number, line in enumerate(path.read_text().splitlines(), start=1):
         if not line.strip():
@@ -145,7 +140,7 @@ def read_calib(path: Path) -> dict[str, np.ndarray]:
 
 
 def _read_rows(path: Path, what: str, columns: int) -> np.ndarray:
-    _require(path, what)
+    require_file(path, what)
     try:
         data = np.loadtxt(path, dtype=np.float64, ndmin=2)
     except ValueError as exc:
@@ -202,7 +197,7 @@ def parse_frames(text: str) -> list[int]:
 
 def read_scan(path: Path) -> np.ndarray:
     """``velodyne/NNNNNN.bin`` -> (N, 4) float32 x, y, z (metres, sensor frame), reflectance."""
-    _require(path, "scan")
+    require_file(path, "scan")
     size = path.stat().st_size
     if size % 16:
         raise SourceFormatError(
@@ -339,7 +334,7 @@ def import_kitti(
     if not sensor_height_m > 0:
         raise SourceFormatError(f"sensor height must be positive, got {sensor_height_m} m")
     for frame in chosen:  # every file is checked before anything is written
-        _require(sequence.scan_path(frame), "scan")
+        require_file(sequence.scan_path(frame), "scan")
 
     T_sequence_drive = sequence.T_sequence_velo(np.array(chosen[:1]))[0]
     T_drive_sequence = invert_transform(T_sequence_drive)
