@@ -77,7 +77,7 @@ def main() -> None:
     side = fig.add_axes((0.05, 0.06, 0.6, 0.36))
     for mesh in shoulder:
         triangles = mesh.vertices[mesh.faces]
-        keep = np.abs(triangles[:, :, 0]).max(axis=1) < 20
+        keep = np.abs(triangles[:, :, 0]).min(axis=1) < 20  # the axes clip the rest
         side.add_collection(
             PolyCollection(
                 triangles[keep][:, :, [0, 2]], facecolor="#1f77b4", edgecolor="none", alpha=0.35

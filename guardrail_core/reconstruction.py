@@ -244,15 +244,23 @@ def reconstruct_run(
     poles, frames = split.poles, split.frames  # with virtual poles where one was missing
     unit_points = [frames[u].to_unit(rails[split.unit_of_point == u]) for u in range(len(frames))]
     unit_points = [p[p[:, 1] >= params.units.ground_clearance_m] for p in unit_points]
-    used = unit_points if max_units is None else unit_points[:max_units]
+    # Units beyond the detected end poles take the model but do not shape it: their x is
+    # only extrapolated (unless no unit is anchored at all).
+    chosen = np.flatnonzero(split.anchored) if split.anchored.any() else np.arange(len(frames))
+    if max_units is not None:
+        chosen = chosen[:max_units]
+    used = [unit_points[u] for u in chosen]
     superimposed = superimpose(used, params.register)
+    superimposed = dataclasses.replace(
+        superimposed, unit_of_point=chosen[superimposed.unit_of_point].astype(np.int32)
+    )
     unregistered = int((~superimposed.registered).sum())
     if unregistered and len(used) > 1:
         notes.append(f"{unregistered} of {len(used)} units kept their rough alignment (ICP failed)")
-    if len(frames) == 1:
+    if len(used) == 1:
         notes.append("a run of one unit: the model rests on a single unit's points")
     registered = np.zeros(len(frames), bool)
-    registered[: len(used)] = superimposed.registered
+    registered[chosen] = superimposed.registered
     if len(superimposed.points) == 0:
         notes.append("no guardrail points between the poles")
         return RunModel(run_id, poles, frames, None, registered, len(xyz), notes), superimposed

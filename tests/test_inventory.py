@@ -78,6 +78,7 @@ def test_rows_summarise_each_run():
     np.testing.assert_allclose(start, positions[0] + ORIGIN, rtol=0, atol=1e-9)
     np.testing.assert_allclose(end, positions[-1] + ORIGIN, rtol=0, atol=1e-9)
     assert (pipe["pole_count"], pipe["units"], pipe["units_registered"]) == (4, 3, 2)
+    assert pipe["poles_seen"] == 4
     assert pipe["notes"] == "one unit not registered; pipe 4 too short"
     assert beam["design"]["height_m"] == pytest.approx(0.35)
     assert beam["design"]["depth_m"] == pytest.approx(0.05, abs=1e-3)

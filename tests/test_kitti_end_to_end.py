@@ -11,6 +11,7 @@ median barrier at y in [5.5, 9] m, a far-side guardrail at y ~ 19.5 m.
 from __future__ import annotations
 
 import csv
+import json
 from pathlib import Path
 
 import cv2
@@ -89,12 +90,36 @@ def test_motorway_w_beam_reconstructed_with_section_and_posts(motorway) -> None:
     assert len(shoulder) == 1
     beam = shoulder[0]
     assert beam["type"] == "beam" and beam["signature"].startswith("beam h")
-    # The rail's top 0.6-0.85 m above the ground, on posts spaced as motorway posts are.
+    # A W-beam's section (the standard A profile is 310 mm tall and 85 mm deep) with its top
+    # 0.6-0.85 m above the ground, on posts spaced as motorway posts are (4 m).
+    section = json.loads(beam["design"])
+    assert 0.28 <= section["height_m"] <= 0.40
+    assert 0.06 <= section["depth_m"] <= 0.14
     assert 0.6 <= float(beam["rail_top_m"]) <= 0.85
-    assert int(beam["pole_count"]) >= 4
-    assert 1.5 <= float(beam["pole_spacing_m"]) <= 4.5
-    assert float(beam["length_m"]) >= 10.0
+    assert 3.8 <= float(beam["pole_spacing_m"]) <= 4.6
+    # The model follows the rail beyond the posts the scan shows (three, within 5 m of the car).
+    assert int(beam["poles_seen"]) >= 3
+    assert float(beam["length_m"]) >= 25.0
     assert (run_dir / "reconstruction" / "meshes" / f"run_{int(beam['run_id']):03d}.glb").is_file()
+
+    models = json.loads((run_dir / "reconstruction" / "models.json").read_text())
+    run = next(r for r in models["runs"] if r["run_id"] == int(beam["run_id"]))
+    seen = sorted(p["position"][0] for p in run["poles"] if p["n_points"] > 0)
+    assert np.all(np.abs(np.diff(seen) - 4.2) < 0.3)
+    # Every post stands on the rail's line (a delineator post before it is not one of them).
+    posts_y = np.array([p["position"][1] for p in run["poles"]])
+    posts_x = np.array([p["position"][0] for p in run["poles"]])
+    assert np.all(np.abs(posts_y - np.interp(posts_x, [-10.0, 25.0], [-4.97, -4.64])) < 0.15)
+    # The section fits the superimposed points: median distance under 2 cm.
+    points = np.load(run_dir / "reconstruction" / "superimposed.npz")[
+        f"run_{int(beam['run_id']):03d}_points"
+    ][:, [2, 1]]
+    curve = np.array(run["model"]["section"])
+    points = points[(points[:, 1] >= curve[0, 1]) & (points[:, 1] <= curve[-1, 1])]
+    a, ab = curve[:-1], np.diff(curve, axis=0)
+    t = np.clip(((points[:, None] - a) * ab).sum(-1) / (ab * ab).sum(-1), 0.0, 1.0)
+    distance = np.linalg.norm(points[:, None] - (a + t[..., None] * ab), axis=-1).min(axis=1)
+    assert np.median(distance) < 0.02
 
 
 @pytest.fixture(scope="module")

@@ -124,8 +124,29 @@ def test_bad_unit_raises(length, pole_radius):
         {"filled_share": 1.5},
         {"taubin_mu": 0.2},
         {"min_points": 0},
+        {"min_x_spread": 1.0},
+        {"max_band_gap": -0.1},
     ],
 )
 def test_params_out_of_range_raise(kwargs):
     with pytest.raises(ReconstructionError):
         BeamParams(**kwargs)
+
+
+def test_clutter_at_one_x_or_far_below_is_not_the_beam():
+    # A sparse real scan: a blockout column at one x just below the beam, and stray ground
+    # points 0.3 m under it; every slice of these holds enough points to count.
+    rng = np.random.default_rng(5)
+    pts, truth = _beam_points(rng)
+    column = np.column_stack(
+        [rng.normal(2.0, 0.02, 300), rng.uniform(0.25, 0.44, 300), rng.uniform(0.0, 0.3, 300)]
+    )
+    ground = np.column_stack(
+        [rng.uniform(0.2, 3.8, 300), rng.uniform(0.05, 0.12, 300), rng.uniform(-0.1, 0.4, 300)]
+    )
+    rec = reconstruct_beam(np.vstack([pts, column, ground]), LENGTH, POST_R)
+    assert abs(rec.section[:, 1].min() - truth[:, 1].min()) < 0.01
+    assert _hausdorff(rec.section, truth) < 0.006
+    naive = BeamParams(min_x_spread=0.0, max_band_gap=1.0)
+    loose = reconstruct_beam(np.vstack([pts, column, ground]), LENGTH, POST_R, naive)
+    assert loose.section[:, 1].min() < truth[:, 1].min() - 0.1

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -116,3 +118,54 @@ def test_bad_input_raises(xyz, ground, match):
 def test_bad_params_raise():
     with pytest.raises(ReconstructionError, match="section_step_m"):
         detect_poles(np.zeros((10, 3)), None, PoleParams(section_step_m=0.0))
+
+
+def _front_cylinder(rng, base, toward_road, radius, height, n=120, noise=0.003):
+    """(n, 3) points on the road-facing half of a vertical cylinder standing at ``base``."""
+    toward = toward_road / np.linalg.norm(toward_road)
+    side = np.cross([0.0, 0.0, 1.0], toward)
+    t = rng.uniform(-np.pi / 2, np.pi / 2, n)
+    r = radius + rng.normal(0, noise, n)
+    ring = np.cos(t)[:, None] * toward + np.sin(t)[:, None] * side
+    return base + r[:, None] * ring + rng.uniform(0, height, n)[:, None] * [0.0, 0.0, 1.0]
+
+
+def test_a_stump_shorter_than_any_guardrail_is_not_a_pole():
+    run = make_run(3, seed=11)
+    rng = np.random.default_rng(11)
+    middle = (run.poles[1] + run.poles[2]) / 2
+    stump = _front_cylinder(rng, middle + 0.3 * run.toward_road, run.toward_road, 0.05, 0.25)
+    xyz = np.vstack([run.xyz, stump])
+    anywhere = PoleParams(max_offset_deviation_m=1.0)  # this test is about the height alone
+    det = detect_poles(xyz, run.ground, anywhere)
+    xy_err, _ = _match(det, run.poles)  # the 4 true poles, not the stump
+    assert xy_err.max() < POSITION_TOL
+    low = dataclasses.replace(anywhere, min_height_m=0.2)
+    assert len(detect_poles(xyz, run.ground, low).poles) == len(run.poles) + 1
+
+
+def test_a_post_off_the_line_of_the_poles_is_not_one_of_them():
+    # A delineator post standing 0.45 m before the rails, 0.8 m from a pole.
+    run = make_run(4, seed=12)
+    rng = np.random.default_rng(12)
+    along = (run.poles[3] - run.poles[2]) / np.linalg.norm(run.poles[3] - run.poles[2])
+    base = run.poles[2] + 0.8 * along + 0.45 * run.toward_road
+    post = _front_cylinder(rng, base, run.toward_road, 0.05, 1.0)
+    det = detect_poles(np.vstack([run.xyz, post]), run.ground)
+    xy_err, _ = _match(det, run.poles)
+    assert xy_err.max() < POSITION_TOL
+    lax = PoleParams(max_offset_deviation_m=1.0)
+    assert len(detect_poles(np.vstack([run.xyz, post]), run.ground, lax).poles) == 6
+
+
+def test_ground_points_on_a_poles_foot_are_not_its_ground():
+    # A sparse scanner's road mask takes in the foot of a pole, 0.1-0.2 m up the pole.
+    run = make_run(3, grade=0.0, seed=13)
+    rng = np.random.default_rng(13)
+    foot = np.vstack(
+        [_front_cylinder(rng, p + [0.0, 0.0, 0.1], run.toward_road, run.pole_radius, 0.1, 30)
+         for p in run.poles]
+    )  # fmt: skip
+    det = detect_poles(run.xyz, np.vstack([run.ground, foot]))
+    _, z_err = _match(det, run.poles)
+    assert z_err.max() < 0.01

@@ -9,7 +9,7 @@ from guardrail_core.errors import ReconstructionError
 from guardrail_core.reconstruct.model import Pole
 from guardrail_core.reconstruct.poles import detect_poles
 from guardrail_core.reconstruct.runs import RunParams, group_runs
-from guardrail_core.reconstruct.units import order_poles, split_units, unit_points
+from guardrail_core.reconstruct.units import UnitParams, order_poles, split_units, unit_points
 from tests.reconstruct_fixtures import make_run
 
 
@@ -111,3 +111,52 @@ def test_unit_points_checks_lengths():
     split = split_units(run.xyz, _poles(run))
     with pytest.raises(ReconstructionError, match="points"):
         unit_points(run.xyz[:10], split)
+
+
+@pytest.mark.parametrize("arc", [None, 30.0])
+def test_the_rail_beyond_the_end_poles_gets_poles_at_the_spacing(arc):
+    # A sparse scan sees the last three poles of a run of six units no more, but their rails.
+    run = make_run(6, arc_radius=arc, missing=(4, 5, 6), seed=21)
+    truth = make_run(6, arc_radius=arc, seed=21).poles
+    det = detect_poles(run.xyz, run.ground)
+    assert len(det.poles) == 4
+    split = split_units(run.xyz, order_poles(det.poles, run.toward_road))
+    assert len(split.frames) == 6 and split.extrapolated.sum() == 3
+    np.testing.assert_array_equal(split.anchored, [True] * 3 + [False] * 3)
+    assert "beyond the end poles" in " ".join(split.notes)
+    placed = np.array([p.position for p in split.poles])
+    order = np.argsort(np.linalg.norm(truth[:, :2] - placed[0, :2], axis=1))
+    placed = placed if order[0] == 0 else placed[::-1]
+    error = np.linalg.norm(placed - truth, axis=1)
+    assert error[:4].max() < 0.01  # detected
+    assert error[4:].max() < 0.05  # placed along the rail (0.5 % of the 6 m extrapolated)
+    # Every rail point has its unit.
+    assert (split.unit_of_point[~run.is_pole] >= 0).all()
+    off = split_units(
+        run.xyz, order_poles(det.poles, run.toward_road), UnitParams(min_extension_points=0)
+    )
+    assert len(off.frames) == 3 and not off.extrapolated.any()
+
+
+def test_uneven_ground_under_the_poles_follows_the_rail():
+    run = make_run(4, seed=22)
+    poles = _poles(run)
+    bumps = [0.05, -0.04, 0.03, 0.0, -0.05]  # a verge measured 5 cm high or low
+    uneven = [
+        Pole(p.position + [0.0, 0.0, b], p.radius, p.height - b, p.n_points)
+        for p, b in zip(poles, bumps, strict=True)
+    ]
+    rails = run.xyz[~run.is_pole]
+    split = split_units(rails, uneven)
+    got = np.array([p.position for p in split.poles])
+    assert np.abs(got - run.poles).max() < 0.01  # back on the ground the rail stands on
+    np.testing.assert_allclose([p.height for p in split.poles], run.pole_height, atol=0.01)
+    assert "uneven ground" in " ".join(split.notes)
+    # Within the tolerance (measurement noise) the measured ground stays.
+    slight = [
+        Pole(p.position + [0.0, 0.0, b / 5], p.radius, p.height, p.n_points)
+        for p, b in zip(poles, bumps, strict=True)
+    ]
+    kept = split_units(rails, slight)
+    np.testing.assert_array_equal([p.position for p in kept.poles], [p.position for p in slight])
+    assert kept.notes == ()

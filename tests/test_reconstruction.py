@@ -142,6 +142,20 @@ def test_a_missing_pole_is_inserted_and_reported() -> None:
     assert "missing pole" in row["notes"]
 
 
+def test_units_beyond_the_seen_poles_take_the_model_but_do_not_shape_it() -> None:
+    synth = make_run(n_units=6, missing=(4, 5, 6), seed=7)  # the last three poles unseen
+    run, superimposed = _reconstruct(synth)
+    assert len(run.poles) == 7 and len(run.units) == 6
+    assert run.model is not None and run.model.n_units == 3
+    assert superimposed is not None
+    assert set(np.unique(superimposed.unit_of_point).tolist()) == {0, 1, 2}
+    assert not run.registered[3:].any()
+    [row] = inventory_rows([run], np.zeros(3))
+    assert row["units"] == 6 and row["units_superimposed"] == 3
+    assert row["pole_count"] == 7 and row["poles_seen"] == 4
+    assert "beyond the end poles" in row["notes"]
+
+
 def test_rails_without_poles_are_not_reconstructed_and_the_inventory_says_why() -> None:
     synth = make_run(n_units=3, seed=5)
     rails = make_run(n_units=3, seed=5, pole_points=0)

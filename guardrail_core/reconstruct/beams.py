@@ -66,6 +66,13 @@ class BeamParams:
     sparse_share : float in [0, 1)
         Slices with fewer points than this share of the median slice are left out (grazing
         views at the edge of a shadow, whose centres are biased).
+    min_x_spread : float in [0, 1)
+        A beam runs the whole unit: slices whose points span (10th to 90th percentile of x)
+        less than this share of the length between the posts are a blockout, a post top or
+        clutter, and are left out.
+    max_band_gap : float, m
+        The beam is one band of heights: slices separated from the band holding the most points
+        by a gap in y above this are left out (clutter at the foot, on a sparse scan).
     fill_shadowed : bool
         Fill the shadowed downward-facing flank below a ridge (the scanner looks down on the
         beam and cannot see it) with the mirror image of the ridge's upper flank about its
@@ -91,6 +98,8 @@ class BeamParams:
     min_points: int = 3
     shadow_gap: float = 0.02
     sparse_share: float = 0.05
+    min_x_spread: float = 0.2
+    max_band_gap: float = 0.1
     fill_shadowed: bool = True
     taubin_lambda: float = 0.5
     taubin_mu: float = -0.53
@@ -101,14 +110,15 @@ class BeamParams:
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise ReconstructionError(f"BeamParams.{name} must be > 0, got {v}")
-        for name in ("max_gap", "type_margin", "pole_margin", "post_gap", "shadow_gap"):
+        lengths = ("max_gap", "type_margin", "pole_margin", "post_gap", "shadow_gap")
+        for name in (*lengths, "max_band_gap"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0):
                 raise ReconstructionError(f"BeamParams.{name} must be >= 0, got {v}")
-        if not 0.0 <= self.sparse_share < 1.0:
-            raise ReconstructionError(
-                f"BeamParams.sparse_share must be in [0, 1), got {self.sparse_share}"
-            )
+        for name in ("sparse_share", "min_x_spread"):
+            v = getattr(self, name)
+            if not 0.0 <= v < 1.0:
+                raise ReconstructionError(f"BeamParams.{name} must be in [0, 1), got {v}")
         for name in ("row_share", "filled_share"):
             v = getattr(self, name)
             if not 0.0 < v <= 1.0:
@@ -286,13 +296,14 @@ def reconstruct_beam(
     if len(pts) == 0:
         return BeamReconstruction(empty, 0, ("no points between the posts: no beam section",))
     # §4.4: 10 mm horizontal slices, the centre of each.
-    section, used = _slice_centres(pts, p)
+    span = length - 2 * x0
+    section, used = _slice_centres(pts, span, p)
     if len(section) >= 2:
         # Posts and blockouts stand behind the beam: drop points behind its rear-most centre.
         front = pts[:, 2] >= section[:, 0].min() - p.post_gap
         if not front.all():
             pts = pts[front]
-            section, used = _slice_centres(pts, p)
+            section, used = _slice_centres(pts, span, p)
     notes: list[str] = []
     if len(section) < 2:
         notes.append(
@@ -313,8 +324,14 @@ def reconstruct_beam(
     return BeamReconstruction(section, int(used), tuple(notes))
 
 
-def _slice_centres(pts: np.ndarray, p: BeamParams) -> tuple[np.ndarray, int]:
-    """(z median, y mean) of each 10 mm slice in y with ``min_points`` points, bottom to top."""
+def _slice_centres(pts: np.ndarray, span: float, p: BeamParams) -> tuple[np.ndarray, int]:
+    """(z median, y mean) of each 10 mm slice in y that is part of the beam, bottom to top.
+
+    A slice is part of the beam when it holds ``min_points`` points and ``sparse_share`` of the
+    median slice, its points span ``min_x_spread`` of ``span`` (metres between the posts), and
+    it lies in the band of such slices, joined across gaps up to ``max_band_gap``, that holds the
+    most points.
+    """
     y0 = float(pts[:, 1].min())
     s = ((pts[:, 1] - y0) / p.slice_interval).astype(np.int64)
     order = np.argsort(s, kind="stable")
@@ -324,11 +341,19 @@ def _slice_centres(pts: np.ndarray, p: BeamParams) -> tuple[np.ndarray, int]:
     counts = np.array([len(g) for g in groups])
     # Slices with few points are the edge of a shadow (a grazing view): left out.
     ok = counts >= max(p.min_points, p.sparse_share * float(np.median(counts)))
+    spread = np.array([np.ptp(np.percentile(pts[g, 0], [10, 90])) for g in groups])
+    ok &= spread >= p.min_x_spread * span
     if not ok.any():
         return np.zeros((0, 2)), 0
-    z = np.array([np.median(pts[g, 2]) for g, k in zip(groups, ok, strict=True) if k])
-    y = np.array([pts[g, 1].mean() for g, k in zip(groups, ok, strict=True) if k])
-    return np.column_stack([z, y]), int(counts[ok].sum())
+    kept = np.flatnonzero(ok)
+    level = s_sorted[bounds - 1] if len(bounds) else np.zeros(0, np.int64)
+    level = np.concatenate([level, [s_sorted[-1]]])[kept]
+    band = np.concatenate([[0], np.cumsum(np.diff(level) * p.slice_interval > p.max_band_gap)])
+    main = int(np.argmax(np.bincount(band, weights=counts[kept])))
+    kept = kept[band == main]
+    z = np.array([np.median(pts[groups[k], 2]) for k in kept])
+    y = np.array([pts[groups[k], 1].mean() for k in kept])
+    return np.column_stack([z, y]), int(counts[kept].sum())
 
 
 def _fill_shadowed(section: np.ndarray, p: BeamParams) -> np.ndarray:

@@ -31,7 +31,7 @@ STATUSES = ("reconstructed", "poles only", "not reconstructed")
 #: The keys of a row, in the CSV's column order.
 ROW_KEYS = (
     "run_id", "status", "type", "signature", "design", "length_m", "height_m", "rail_top_m",
-    "pole_count", "pole_radius_m", "pole_spacing_m", "pole_spacing_min_m", "pole_spacing_max_m",
+    "pole_count", "poles_seen", "pole_radius_m", "pole_spacing_m", "pole_spacing_min_m", "pole_spacing_max_m",
     "start_x", "start_y", "start_z", "end_x", "end_y", "end_z",
     "units", "units_registered", "units_superimposed", "n_points", "notes",
 )  # fmt: skip
@@ -146,6 +146,7 @@ def inventory_rows(
         ``design`` (structured: a list of pipes, or the beam's section summary; None);
         ``length_m`` (sum of distances between consecutive poles); ``height_m`` (the highest of
         the median pole height and the rails' top); ``rail_top_m``; ``pole_count``;
+        ``poles_seen`` (poles with points; the others were placed where one was missing);
         ``pole_radius_m`` (median); ``pole_spacing_m`` (median) with ``pole_spacing_min_m`` and
         ``pole_spacing_max_m``; ``start_x, start_y, start_z, end_x, end_y, end_z`` (first and last
         pole's ground point, map coordinates, float64); ``units``; ``units_registered``;
@@ -193,6 +194,7 @@ def inventory_rows(
                 "height_m": _round(max(heights), 3) if heights else None,
                 "rail_top_m": _round(rail_top, 3) if rail_top is not None else None,
                 "pole_count": len(run.poles),
+                "poles_seen": sum(1 for p in run.poles if p.n_points > 0),
                 "pole_radius_m": (
                     _round(np.median([p.radius for p in run.poles]), 4) if run.poles else None
                 ),

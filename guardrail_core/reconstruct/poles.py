@@ -85,6 +85,9 @@ class PoleParams:
     """Metres. Smallest accepted pole radius (data: 30.5 mm; balusters are 11-14 mm)."""
     max_radius_m: float = 0.09
     """Metres. Largest accepted pole radius (data: 70 mm)."""
+    min_height_m: float = 0.3
+    """Metres. A pole stands at least this tall above the ground (the lowest guardrail, a
+    W-beam's post, stands 0.6 m); shorter stacks are clutter at the run's foot."""
     max_height_m: float = 1.6
     """Metres. Taller stacks are sign or lamp posts, not guardrail poles (data: 0.78-1.1 m)."""
     ransac_trials: int = 256
@@ -117,6 +120,13 @@ class PoleParams:
     """Metres. Ground points within this horizontal distance of the axis give the ground height."""
     ground_k: int = 16
     """Points. The ground height is the median z of the nearest this-many ground points."""
+    max_offset_deviation_m: float = 0.1
+    """Metres. The poles of a run stand at one offset from its rails (one design): with at least
+    three poles, one whose offset from the rail points near it differs from the poles' median
+    offset by more than this is not one of them (a delineator post before a beam)."""
+    offset_window_m: float = 1.5
+    """Metres. The rail points within this horizontal distance of a pole's axis give its offset
+    from the rails (their median distance across the local run direction)."""
     no_ground_window_m: float = 2.5
     """Metres. Without ground points, a stack's base is tested against the lowest run point
     within this horizontal distance of the axis: it covers the nearest pole (poles stand at
@@ -399,6 +409,8 @@ def detect_poles(
     centre, ground_z = measured["centre"], measured["ground_z"]
     member_pole = measured["member_pole"]
     is_pole = (member_pole >= 0) & accept[np.maximum(member_pole, 0)]
+    accept = accept & _consistent_offsets(xyz[:, :2], is_pole, centre, accept, params)
+    is_pole = (member_pole >= 0) & accept[np.maximum(member_pole, 0)]
     n_member = np.bincount(member_pole[is_pole], minlength=len(centre))
     poles = [
         Pole(
@@ -506,6 +518,7 @@ def _measure(
     extent_share = (z_hi - z_lo) / np.maximum(height, 1e-9)
     accept = (
         (z_lo - base_ref <= params.max_base_height_m)  # a pole stands on the ground
+        & (height >= params.min_height_m)
         & (height <= params.max_height_m)
         & (extent_share >= params.min_extent_share)
     )
@@ -622,22 +635,25 @@ def _ground_height(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Ground heights (P,) at each axis, metres: (for the base test, for the position).
 
-    From the ``ground_k`` nearest ground points within ``ground_radius_m`` (median z): both the
-    same. Without ground points there: the base is tested against the lowest run point within
-    ``no_ground_window_m`` (the neighbouring pole's base for a baluster), and the position
-    takes the pole's own lowest point ``low`` (P,) (a pole reaches the ground).
+    From the ``ground_k`` nearest ground points within ``ground_radius_m`` outside the widest
+    pole's footprint (median z): both the same. Without ground points there: the base is
+    tested against the lowest run point within ``no_ground_window_m`` (the neighbouring pole's
+    base for a baluster), and the position takes the pole's own lowest point ``low`` (P,) (a
+    pole reaches the ground).
     """
     out = np.full(len(centre), np.nan)
     if len(ground):
-        k = min(params.ground_k, len(ground))
-        d, i = cKDTree(ground[:, :2]).query(
-            centre, k=k, distance_upper_bound=params.ground_radius_m
-        )
-        d, i = d.reshape(len(centre), k), i.reshape(len(centre), k)
-        valid = np.isfinite(d)
-        z = np.where(valid, ground[np.minimum(i, len(ground) - 1), 2], np.nan)
-        has = valid.any(axis=1)
-        out[has] = np.nanmedian(z[has], axis=1)
+        # Ground points on the pole's own footprint are the pole's foot (a sparse scanner's
+        # road mask takes some in), not the ground around it.
+        foot = params.max_radius_m + params.member_margin_m
+        tree = cKDTree(ground[:, :2])
+        for k, near in enumerate(tree.query_ball_point(centre, params.ground_radius_m)):
+            near = np.asarray(near, np.int64)  # per axis
+            d = np.linalg.norm(ground[near, :2] - centre[k], axis=1)
+            near, d = near[d > foot], d[d > foot]
+            if len(near):
+                nearest = near[np.argsort(d, kind="stable")[: params.ground_k]]
+                out[k] = float(np.median(ground[nearest, 2]))
     position = np.where(np.isfinite(out), out, low)
     missing = np.flatnonzero(~np.isfinite(out))
     if len(missing):
@@ -656,6 +672,42 @@ def _ground_height(
             todo = todo[~found]
         out[missing] = np.minimum(lowest, low[missing])
     return out, position
+
+
+def _consistent_offsets(
+    xy: np.ndarray, is_pole: np.ndarray, centre: np.ndarray, accept: np.ndarray, params: PoleParams
+) -> np.ndarray:
+    """(P,) bool: False for an accepted axis that stands off the line of the run's other poles.
+
+    Each pole's offset is the median signed distance of the rail points (not pole points)
+    within ``offset_window_m`` of its axis from the axis, across their principal direction
+    (oriented along the run's, so the sign means the same side for every pole). With fewer
+    than three accepted poles, or fewer than 10 rail points near a pole, nothing is rejected.
+    """
+    keep = np.ones(len(centre), bool)
+    idx = np.flatnonzero(accept)
+    rails = xy[~is_pole]
+    if len(idx) < 3 or len(rails) < 10:
+        return keep
+    sub = rails[:: max(1, len(rails) // 5000)]
+    _, _, vt = np.linalg.svd(sub - sub.mean(axis=0), full_matrices=False)
+    run_dir = vt[0]
+    tree = cKDTree(rails)
+    offset = np.full(len(idx), np.nan)
+    for j, k in enumerate(idx):  # per pole (a few per run)
+        near = rails[tree.query_ball_point(centre[k], params.offset_window_m)]
+        if len(near) < 10:
+            continue
+        _, _, v = np.linalg.svd(near - near.mean(axis=0), full_matrices=False)
+        along = v[0] if v[0] @ run_dir >= 0 else -v[0]
+        across = np.array([-along[1], along[0]])
+        offset[j] = float(np.median((near - centre[k]) @ across))
+    known = np.isfinite(offset)
+    if known.sum() < 3:
+        return keep
+    deviation = np.abs(offset - np.median(offset[known]))
+    keep[idx[known & (deviation > params.max_offset_deviation_m)]] = False
+    return keep
 
 
 def _along_run_order(xyz: np.ndarray, centre: np.ndarray) -> np.ndarray:

@@ -10,6 +10,15 @@ so every unit has the design length and superimposes with the others (§4.2); th
 reports them (``virtual``) and says so in ``notes``. The spacing is only known with at least
 two gaps; a run of two poles is one unit.
 
+Sparse real scans (a spinning multi-beam scanner's single frame) need two more things:
+
+- poles are seen only near the scanner while the rail goes on: virtual poles are placed at the
+  spacing along the rail beyond the end poles (``extrapolated``); their units take the model
+  but do not shape it, since their x is only extrapolated;
+- the ground beside real posts is uneven (a verge, a kerb): where the rail's height above the
+  measured ground differs between poles by more than a tolerance, the poles' ground follows
+  the rail, so all units superimpose.
+
 References
 ----------
 Matsumoto, Mori, Masuda (2019), "Extraction and shape reconstruction of guardrails using mobile
@@ -44,6 +53,19 @@ class UnitParams:
     missing_pole_ratio: float = 1.6
     """A gap longer than this many times the median gap between poles has missing poles:
     round(gap / median) - 1 virtual poles are inserted in it."""
+    rail_level_tolerance_m: float = 0.03
+    """Metres. In one design the rail's top (95th percentile of z within ``rail_top_radius_m``
+    of a pole) stands at one height above every pole's ground. Where these heights spread
+    (max - min) wider than this, the ground under the poles is uneven (a verge, a kerb; on a
+    real motorway scan they spread 0.71-0.79 m) and each pole's ground is set to the rail top
+    near it less the median height, so the units follow the rail. 0 turns this off."""
+    rail_top_radius_m: float = 1.0
+    """Metres. Rail points within this horizontal distance of a pole give the rail top there."""
+    min_extension_points: int = 10
+    """Points. Where at least this many rail points lie more than half a spacing beyond an end
+    pole (within a spacing of it), the rail goes on where no pole was seen (a sparse scan sees
+    poles only near the scanner): a virtual pole is added a spacing further along the rail, and
+    again while the rail goes on. 0 turns this off."""
 
 
 @dataclass(frozen=True)
@@ -57,6 +79,7 @@ class UnitSplit:
     poles : (U + 1,) the poles the frames stand on, detected and virtual, in order
     virtual : (U + 1,) bool, poles inserted where one was missing
     notes : what was done about missing poles, in words
+    extrapolated : (U + 1,) bool, virtual poles added beyond the detected end poles
     """
 
     frames: list[UnitFrame]
@@ -64,6 +87,13 @@ class UnitSplit:
     poles: list[Pole] = field(default_factory=list)
     virtual: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     notes: tuple[str, ...] = ()
+    extrapolated: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+
+    @property
+    def anchored(self) -> np.ndarray:
+        """(U,) bool: units between poles that were detected or interpolated between detected
+        ones (their x is known to the poles' accuracy; an extrapolated pole's is not)."""
+        return ~(self.extrapolated[:-1] | self.extrapolated[1:])
 
 
 def order_poles(poles: list[Pole], toward_road: np.ndarray) -> list[Pole]:
@@ -138,6 +168,102 @@ def _fill_missing(
     return out, np.array(virtual), notes
 
 
+def _level_to_rail(
+    poles: list[Pole], rails: np.ndarray, params: UnitParams
+) -> tuple[list[Pole], list[str]]:
+    """Poles whose ground follows the rail where the measured ground is uneven (see
+    ``rail_level_tolerance_m``); each pole keeps its top (its height changes with its ground)."""
+    if params.rail_level_tolerance_m <= 0 or len(poles) < 2 or len(rails) == 0:
+        return list(poles), []
+    pos = np.array([p.position for p in poles], np.float64)
+    # The run's grade (a line through the measured grounds), so an end pole, which has rails
+    # on one side only, does not read the grade as rail height.
+    chord = np.linalg.norm(np.diff(pos[:, :2], axis=0), axis=1)
+    grade = np.polyfit(np.concatenate([[0.0], np.cumsum(chord)]), pos[:, 2], 1)[0]
+    tangent = np.gradient(pos[:, :2], axis=0)
+    tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-12)
+    near = cKDTree(rails[:, :2]).query_ball_point(pos[:, :2], params.rail_top_radius_m)
+    top = np.full(len(poles), np.nan)
+    for k, i in enumerate(near):  # per pole
+        if len(i) >= 3:
+            along = (rails[i, :2] - pos[k, :2]) @ tangent[k]
+            top[k] = np.percentile(rails[i, 2] - grade * along, 95)
+    known = np.isfinite(top)
+    if known.sum() < 2:
+        return list(poles), []
+    above = top - pos[:, 2]
+    low, high = np.nanmin(above), np.nanmax(above)
+    if high - low <= params.rail_level_tolerance_m:
+        return list(poles), []
+    level = float(np.nanmedian(above))
+    out = []
+    for p, t in zip(poles, top, strict=True):  # per pole
+        if not np.isfinite(t):
+            out.append(p)
+            continue
+        ground = t - level
+        position = np.array([p.position[0], p.position[1], ground])
+        height = p.height + float(p.position[2]) - ground
+        out.append(Pole(position=position, radius=p.radius, height=height, n_points=p.n_points))
+    note = (
+        f"the rail's top stands {low:.2f}-{high:.2f} m above the ground measured at the poles "
+        f"(uneven ground): the poles' ground follows the rail, {level:.2f} m below its top"
+    )
+    return out, [note]
+
+
+def _extend_ends(
+    poles: list[Pole], rails: np.ndarray, params: UnitParams
+) -> tuple[list[Pole], int, int]:
+    """Virtual poles beyond both end poles where the rail goes on (see ``min_extension_points``).
+
+    Each new pole stands a spacing (the median gap) from the current end pole, along the
+    principal direction of the rail points within the next spacing (a curve is followed), its
+    ground raised or lowered as the rail's top (95th percentile of z) rises or falls from the
+    previous stretch to the next. Returns the poles and how many were added before and after.
+    """
+    if params.min_extension_points <= 0 or len(poles) < 2 or len(rails) == 0:
+        return list(poles), 0, 0
+    pos = np.array([p.position for p in poles], np.float64)
+    spacing = float(np.median(np.linalg.norm(np.diff(pos[:, :2], axis=0), axis=1)))
+    if spacing <= 0:
+        return list(poles), 0, 0
+    template = dict(
+        radius=float(np.median([p.radius for p in poles])),
+        height=float(np.median([p.height for p in poles])),
+        n_points=0,
+    )
+    limit = int(np.ptp(rails[:, :2], axis=0).max() / spacing) + 1
+    added: list[list[Pole]] = []
+    for end, prev in ((pos[-1], pos[-2]), (pos[0], pos[1])):
+        new: list[Pole] = []
+        cur, direction = end.copy(), (end - prev)[:2] / np.linalg.norm((end - prev)[:2])
+        top_before = None
+        for _ in range(limit):  # per added pole
+            d = rails[:, :2] - cur[:2]
+            t = d @ direction
+            across = np.abs(d @ np.array([-direction[1], direction[0]]))
+            near = across <= params.max_offset_m
+            ahead = near & (t > 0) & (t <= spacing)
+            if (ahead & (t > 0.5 * spacing)).sum() < params.min_extension_points:
+                break
+            if top_before is None:
+                behind = near & (t <= 0) & (t > -spacing)
+                if behind.sum() < params.min_extension_points:
+                    break
+                top_before = float(np.percentile(rails[behind, 2], 95))
+            xy = rails[ahead, :2]
+            _, _, vt = np.linalg.svd(xy - xy.mean(axis=0), full_matrices=False)
+            direction = vt[0] if vt[0] @ direction >= 0 else -vt[0]
+            top = float(np.percentile(rails[ahead, 2], 95))
+            cur = np.array([*(cur[:2] + spacing * direction), cur[2] + top - top_before])
+            top_before = top
+            new.append(Pole(position=cur.copy(), **template))  # type: ignore[arg-type]
+        added.append(new)
+    after, before = added
+    return before[::-1] + list(poles) + after, len(before), len(after)
+
+
 def split_units(xyz: np.ndarray, poles: list[Pole], params: UnitParams = UnitParams()) -> UnitSplit:
     """Units of one run: a frame between each pair of consecutive poles, and each point's unit.
 
@@ -162,16 +288,27 @@ def split_units(xyz: np.ndarray, poles: list[Pole], params: UnitParams = UnitPar
     n = len(xyz)
     if len(poles) < 2:
         note = f"{len(poles)} pole(s): no unit"
-        return UnitSplit(
-            [], np.full(n, -1, np.int32), list(poles), np.zeros(len(poles), bool), (note,)
-        )
+        none = np.zeros(len(poles), bool)
+        return UnitSplit([], np.full(n, -1, np.int32), list(poles), none, (note,), none)
     all_poles, virtual, notes = _fill_missing(list(poles), params)
+    all_poles, level_notes = _level_to_rail(all_poles, xyz, params)
+    notes.extend(level_notes)
+    all_poles, n_before, n_after = _extend_ends(all_poles, xyz, params)
+    virtual = np.concatenate([np.ones(n_before, bool), virtual, np.ones(n_after, bool)])
+    extrapolated = np.zeros(len(all_poles), bool)
+    extrapolated[:n_before] = True
+    extrapolated[len(all_poles) - n_after :] = True
+    if n_before or n_after:
+        notes.append(
+            f"the rail goes on beyond the end poles: {n_before + n_after} pole(s) placed at the "
+            "spacing along it (not seen); those units take the model but do not shape it"
+        )
     pos = np.array([p.position for p in all_poles], np.float64)
     frames = [UnitFrame.between(pos[i], pos[i + 1]) for i in range(len(pos) - 1)]
     n_units = len(frames)
     unit = np.full(n, -1, np.int32)
     if n == 0:
-        return UnitSplit(frames, unit, all_poles, virtual, tuple(notes))
+        return UnitSplit(frames, unit, all_poles, virtual, tuple(notes), extrapolated)
     # Candidates: the two units meeting at the nearest pole.
     _, nearest = cKDTree(pos[:, :2]).query(xyz[:, :2])
     cand = np.stack([np.clip(nearest - 1, 0, n_units - 1), np.clip(nearest, 0, n_units - 1)], 1)
@@ -192,7 +329,7 @@ def split_units(xyz: np.ndarray, poles: list[Pole], params: UnitParams = UnitPar
     rows = np.arange(n)
     ok = (outside[rows, pick] <= params.end_margin_m) & (offset[rows, pick] <= params.max_offset_m)
     unit[ok] = cand[rows[ok], pick[ok]]
-    return UnitSplit(frames, unit, all_poles, virtual, tuple(notes))
+    return UnitSplit(frames, unit, all_poles, virtual, tuple(notes), extrapolated)
 
 
 def unit_points(xyz: np.ndarray, split: UnitSplit) -> tuple[list[np.ndarray], list[np.ndarray]]:
