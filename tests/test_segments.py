@@ -254,6 +254,47 @@ def test_slices_are_half_open_and_continue_below_zero() -> None:
     np.testing.assert_array_equal(segments.point_segment, [2, 2, 3, 4, 1, 1, 0])
 
 
+def _median_slice(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One component in one slice, across: a rail at 6.35 m (300 points) with its post 0.1 m
+    behind (20 points), a hedge thinly spread over 6.6-7.5 m (40 points), a rail at 8.1 m (300).
+    Returns station, lateral and the truth piece (0 near rail and post, 1 hedge, 2 far rail)."""
+    lateral = np.concatenate(
+        [
+            rng.normal(6.35, 0.02, 300),
+            rng.normal(6.45, 0.01, 20),
+            rng.uniform(6.6, 7.5, 40),
+            rng.normal(8.1, 0.02, 300),
+        ]
+    )
+    truth = np.repeat([0, 0, 1, 2], [300, 20, 40, 300])
+    return rng.uniform(0.0, 0.5, len(lateral)), lateral, truth
+
+
+def test_a_wide_slice_is_cut_where_its_points_thin_out_across() -> None:
+    station, lateral, truth = _median_slice(np.random.default_rng(40))
+    component = np.zeros(len(lateral), np.int64)
+    segments = slice_components(component, station, PARAMS, lateral)
+    assert len(segments) == 3
+    for s in range(3):  # each piece is one thing: the post stays with its rail
+        assert len(np.unique(truth[segments.members(s)])) == 1
+    np.testing.assert_array_equal(segments.component, 0)
+    np.testing.assert_array_equal(segments.slice_index, 0)
+    # Without lateral offsets, or with the cut turned off, the slice stays whole.
+    assert len(slice_components(component, station, PARAMS)) == 1
+    whole = SegmentParams(max_width_m=0.0)
+    assert len(slice_components(component, station, whole, lateral)) == 1
+
+
+def test_a_narrow_or_evenly_filled_slice_stays_whole() -> None:
+    rng = np.random.default_rng(41)
+    station = rng.uniform(0.0, 0.5, 400)
+    beam_and_post = np.concatenate([rng.normal(4.8, 0.02, 380), rng.normal(5.3, 0.01, 20)])
+    wall = rng.uniform(3.0, 6.0, 400)  # 3 m wide, evenly filled
+    for lateral in (beam_and_post, wall):
+        segments = slice_components(np.zeros(400, np.int64), station, PARAMS, lateral)
+        assert len(segments) == 1
+
+
 def random_segments(seed: int, n: int = 3000) -> tuple[np.ndarray, np.ndarray, Segments]:
     """Random components (-1: not kept; sparse numbers) and stations, including negative."""
     rng = np.random.default_rng(seed)

@@ -39,6 +39,19 @@ class SegmentParams:
     slice_length_m: float = 0.5
     """Section planes perpendicular to the trajectory cut components every this many metres
     (the paper's 0.5 m)."""
+    max_width_m: float = 1.0
+    """A slice wider than this across the trajectory holds things side by side that something
+    joins (a median's two rails and the hedge between them; a rail against a bush): it is cut
+    where its points thin out across the trajectory (see ``valley_share``). 0 turns this off.
+    A guardrail's slice, posts included, is at most about 0.5 m wide."""
+    width_bin_m: float = 0.1
+    """Metres. Bins of the lateral offset in which a wide slice's density is measured."""
+    valley_share: float = 0.1
+    """A bin holding at most this share of the fullest bin's points is a valley bin."""
+    min_valley_m: float = 0.3
+    """Metres. A wide slice is cut on both sides of every run of valley bins at least this wide
+    (each such run is a piece of its own); narrower thin stretches (a post behind its rail,
+    the dip between a beam's ridges) do not cut."""
 
 
 @dataclass(frozen=True)
@@ -182,7 +195,10 @@ def absorb_fragments(
 
 
 def slice_components(
-    component: np.ndarray, station: np.ndarray, params: SegmentParams = SegmentParams()
+    component: np.ndarray,
+    station: np.ndarray,
+    params: SegmentParams = SegmentParams(),
+    lateral: np.ndarray | None = None,
 ) -> Segments:
     """Cut components into segments by planes perpendicular to the trajectory.
 
@@ -190,11 +206,14 @@ def slice_components(
     ----------
     component : (N,) int, component of every point, -1 for points not kept
     station : (N,) float64, metres along the trajectory (see :mod:`guardrail_core.extract.track`)
-    params : slice length
+    params : slice length, and how wide slices are cut across
+    lateral : (N,) float64, metres left of the trajectory; with it, slices wider than
+        ``params.max_width_m`` are cut where their points thin out across the trajectory
 
     References
     ----------
-    Matsumoto et al. 2019, §3.1 (0.5 m slices along the trajectory, Fig. 6).
+    Matsumoto et al. 2019, §3.1 (0.5 m slices along the trajectory, Fig. 6). The cut across is
+    ours: on a sparse real scan a median's hedge joins its two rails into one component.
     """
     component = np.asarray(component, np.int64)
     kept = np.flatnonzero(component >= 0)
@@ -216,6 +235,15 @@ def slice_components(
     n_components = int(component[kept].max()) + 1
     key = (slices - first_slice) * n_components + component[kept]
     unique_keys, segment_of_kept = np.unique(key, return_inverse=True)
+    if lateral is not None and params.max_width_m > 0:
+        piece = _lateral_pieces(segment_of_kept, np.asarray(lateral, np.float64)[kept], params)
+        if piece.any():
+            # Pieces of one slice keep its key; they are told apart by a second key.
+            pairs, segment_of_kept = np.unique(
+                np.stack([segment_of_kept, piece], axis=1), axis=0, return_inverse=True
+            )
+            segment_of_kept = segment_of_kept.reshape(-1)
+            unique_keys = unique_keys[pairs[:, 0]]
     point_segment[kept] = segment_of_kept
     order_in_kept = np.argsort(segment_of_kept, kind="stable")
     n_points = np.bincount(segment_of_kept, minlength=len(unique_keys)).astype(np.int64)
@@ -228,6 +256,38 @@ def slice_components(
         order=kept[order_in_kept],
         starts=np.concatenate([[0], np.cumsum(n_points)]),
     )
+
+
+def _lateral_pieces(segment: np.ndarray, lateral: np.ndarray, params: SegmentParams) -> np.ndarray:
+    """(K,) int64: the piece of its slice each point falls in (0 for slices left whole).
+
+    A slice wider than ``max_width_m`` is binned across (``width_bin_m``); bins with at most
+    ``valley_share`` of the fullest bin's points are valleys; each run of valley bins at least
+    ``min_valley_m`` wide is a piece, and so is each stretch between such runs.
+    """
+    piece = np.zeros(len(segment), np.int64)
+    n_seg = int(segment.max()) + 1 if len(segment) else 0
+    low = np.full(n_seg, np.inf)
+    high = np.full(n_seg, -np.inf)
+    np.minimum.at(low, segment, lateral)
+    np.maximum.at(high, segment, lateral)
+    wide = np.flatnonzero(high - low > params.max_width_m)
+    if len(wide) == 0:
+        return piece
+    members = np.flatnonzero(np.isin(segment, wide))
+    order = members[np.argsort(segment[members], kind="stable")]
+    bounds = np.searchsorted(segment[order], np.concatenate([wide, [n_seg]]))
+    for k, s in enumerate(wide):  # per wide slice (few: most slices are narrow)
+        idx = order[bounds[k] : bounds[k + 1]]
+        b = ((lateral[idx] - low[s]) / params.width_bin_m).astype(np.int64)
+        counts = np.bincount(b)
+        valley = counts <= params.valley_share * counts.max()
+        run = np.concatenate([[0], np.cumsum(valley[1:] != valley[:-1])])
+        too_narrow = np.bincount(run)[run] * params.width_bin_m < params.min_valley_m - 1e-9
+        valley &= ~too_narrow
+        run = np.concatenate([[0], np.cumsum(valley[1:] != valley[:-1])])
+        piece[idx] = run[b]
+    return piece
 
 
 @dataclass(frozen=True)
