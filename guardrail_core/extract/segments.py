@@ -239,11 +239,11 @@ def slice_components(
         piece = _lateral_pieces(segment_of_kept, np.asarray(lateral, np.float64)[kept], params)
         if piece.any():
             # Pieces of one slice keep its key; they are told apart by a second key.
+            n_pieces = int(piece.max()) + 1
             pairs, segment_of_kept = np.unique(
-                np.stack([segment_of_kept, piece], axis=1), axis=0, return_inverse=True
+                segment_of_kept * n_pieces + piece, return_inverse=True
             )
-            segment_of_kept = segment_of_kept.reshape(-1)
-            unique_keys = unique_keys[pairs[:, 0]]
+            unique_keys = unique_keys[pairs // n_pieces]
     point_segment[kept] = segment_of_kept
     order_in_kept = np.argsort(segment_of_kept, kind="stable")
     n_points = np.bincount(segment_of_kept, minlength=len(unique_keys)).astype(np.int64)
@@ -274,6 +274,32 @@ def _lateral_pieces(segment: np.ndarray, lateral: np.ndarray, params: SegmentPar
     wide = np.flatnonzero(high - low > params.max_width_m)
     if len(wide) == 0:
         return piece
+    # Every wide slice's bins laid end to end: cell = its first bin + the point's bin.
+    n_bins = np.zeros(n_seg, np.int64)
+    n_bins[wide] = ((high[wide] - low[wide]) / params.width_bin_m).astype(np.int64) + 1
+    first_bin = np.concatenate([[0], np.cumsum(n_bins)[:-1]])
+    members = np.flatnonzero(n_bins[segment] > 0)
+    s = segment[members]
+    cell = first_bin[s] + ((lateral[members] - low[s]) / params.width_bin_m).astype(np.int64)
+    total = int(n_bins.sum())
+    counts = np.bincount(cell, minlength=total)
+    owner = np.repeat(np.arange(n_seg), n_bins)
+    fullest = np.maximum.reduceat(counts, first_bin[wide])
+    valley = counts <= params.valley_share * np.repeat(fullest, n_bins[wide])
+    opens = np.ones(total, bool)  # a slice's first bin opens its first piece
+    opens[1:] = owner[1:] != owner[:-1]
+
+    def runs(flag: np.ndarray) -> np.ndarray:
+        """Run number of each bin: a run ends where ``flag`` changes or a slice ends."""
+        start = opens.copy()
+        start[1:] |= flag[1:] != flag[:-1]
+        return np.cumsum(start) - 1
+
+    run = runs(valley)
+    valley &= np.bincount(run)[run] * params.width_bin_m >= params.min_valley_m - 1e-9
+    run = runs(valley)
+    piece[members] = (run - run[first_bin[owner]])[cell]
+    return piece
     members = np.flatnonzero(np.isin(segment, wide))
     order = members[np.argsort(segment[members], kind="stable")]
     bounds = np.searchsorted(segment[order], np.concatenate([wide, [n_seg]]))
