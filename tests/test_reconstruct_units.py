@@ -160,3 +160,19 @@ def test_uneven_ground_under_the_poles_follows_the_rail():
     kept = split_units(rails, slight)
     np.testing.assert_array_equal([p.position for p in kept.poles], [p.position for p in slight])
     assert kept.notes == ()
+
+
+def test_clutter_across_the_run_beyond_its_end_places_no_pole():
+    # A bush 1.0-1.3 m beyond the last pole, 2 m across the run: its points run across, not on.
+    run = make_run(3, grade=0.0, seed=23)
+    rng = np.random.default_rng(23)
+    along = (run.poles[-1] - run.poles[-2]) / np.linalg.norm(run.poles[-1] - run.poles[-2])
+    n = 300
+    bush = (
+        run.poles[-1]
+        + rng.uniform(1.0, 1.3, (n, 1)) * along
+        + rng.uniform(-1.0, 1.0, (n, 1)) * run.toward_road
+        + rng.uniform(0.2, 0.9, (n, 1)) * [0.0, 0.0, 1.0]
+    )
+    split = split_units(np.vstack([run.xyz[~run.is_pole], bush]), _poles(run))
+    assert len(split.frames) == 3 and not split.extrapolated.any()

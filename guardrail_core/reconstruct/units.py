@@ -37,6 +37,9 @@ from guardrail_core.reconstruct.model import Pole
 from guardrail_core.reconstruct.runs import check_points
 from guardrail_core.reconstruct.unit_frame import UP, UnitFrame
 
+#: Cosine of the largest turn (30 degrees) from one placed pole to the next beyond the end poles.
+MAX_TURN_COS = float(np.cos(np.radians(30.0)))
+
 
 @dataclass(frozen=True)
 class UnitParams:
@@ -228,11 +231,8 @@ def _extend_ends(
     spacing = float(np.median(np.linalg.norm(np.diff(pos[:, :2], axis=0), axis=1)))
     if spacing <= 0:
         return list(poles), 0, 0
-    template = dict(
-        radius=float(np.median([p.radius for p in poles])),
-        height=float(np.median([p.height for p in poles])),
-        n_points=0,
-    )
+    radius = float(np.median([p.radius for p in poles]))
+    height = float(np.median([p.height for p in poles]))
     limit = int(np.ptp(rails[:, :2], axis=0).max() / spacing) + 1
     added: list[list[Pole]] = []
     for end, prev in ((pos[-1], pos[-2]), (pos[0], pos[1])):
@@ -254,11 +254,14 @@ def _extend_ends(
                 top_before = float(np.percentile(rails[behind, 2], 95))
             xy = rails[ahead, :2]
             _, _, vt = np.linalg.svd(xy - xy.mean(axis=0), full_matrices=False)
-            direction = vt[0] if vt[0] @ direction >= 0 else -vt[0]
+            turn = vt[0] if vt[0] @ direction >= 0 else -vt[0]
+            if turn @ direction < MAX_TURN_COS:
+                break  # not a rail going on: clutter across it, or the run's end turning away
+            direction = turn
             top = float(np.percentile(rails[ahead, 2], 95))
             cur = np.array([*(cur[:2] + spacing * direction), cur[2] + top - top_before])
             top_before = top
-            new.append(Pole(position=cur.copy(), **template))  # type: ignore[arg-type]
+            new.append(Pole(position=cur.copy(), radius=radius, height=height, n_points=0))
         added.append(new)
     after, before = added
     return before[::-1] + list(poles) + after, len(before), len(after)
