@@ -647,13 +647,23 @@ def _ground_height(
         # road mask takes some in), not the ground around it.
         foot = params.max_radius_m + params.member_margin_m
         tree = cKDTree(ground[:, :2])
-        for k, near in enumerate(tree.query_ball_point(centre, params.ground_radius_m)):
-            near = np.asarray(near, np.int64)  # per axis
-            d = np.linalg.norm(ground[near, :2] - centre[k], axis=1)
-            near, d = near[d > foot], d[d > foot]
+        k = min(4 * params.ground_k, len(ground))
+        d, i = tree.query(centre, k=k, distance_upper_bound=params.ground_radius_m)
+        d, i = d.reshape(len(centre), k), i.reshape(len(centre), k)
+        valid = np.isfinite(d) & (d > foot)
+        valid &= np.cumsum(valid, axis=1) <= params.ground_k
+        z = np.where(valid, ground[np.minimum(i, len(ground) - 1), 2], np.nan)
+        enough = (valid.sum(axis=1) == params.ground_k) | ~np.isfinite(d[:, -1])
+        has = valid.any(axis=1) & enough
+        out[has] = np.nanmedian(z[has], axis=1)
+        # Dense ground can fill the nearest k with footprint points: search the whole radius.
+        for a in np.flatnonzero(~enough):  # rare
+            near = np.asarray(tree.query_ball_point(centre[a], params.ground_radius_m), np.int64)
+            dist = np.linalg.norm(ground[near, :2] - centre[a], axis=1)
+            near, dist = near[dist > foot], dist[dist > foot]
             if len(near):
-                nearest = near[np.argsort(d, kind="stable")[: params.ground_k]]
-                out[k] = float(np.median(ground[nearest, 2]))
+                nearest = near[np.argsort(dist, kind="stable")[: params.ground_k]]
+                out[a] = float(np.median(ground[nearest, 2]))
     position = np.where(np.isfinite(out), out, low)
     missing = np.flatnonzero(~np.isfinite(out))
     if len(missing):
