@@ -107,6 +107,39 @@ def test_curved_pipe_is_curved():
     assert abs(rec.pipes[0].radius - 0.0136) < 0.0015
 
 
+def _arch(rng, centre, radius, r, n):
+    """Points on the +z half of a pipe bent into a half circle standing on ``centre``."""
+    a = rng.uniform(0, np.pi, n)
+    u = rng.uniform(-r, r, n)
+    xy = np.asarray(centre) + (radius + u)[:, None] * np.column_stack([np.cos(a), np.sin(a)])
+    return np.column_stack([xy, np.sqrt(r * r - u * u)]) + rng.normal(0, 0.0015, (n, 3))
+
+
+@pytest.mark.parametrize("seed", [1, 3])
+def test_an_arch_foot_does_not_take_over_its_rail(seed):
+    # Two arches standing on the lower rail: past the outer arch's right foot, the chain of
+    # slice centres could run on along the rail (seed 3 did), leaving the rail 0.6 m short.
+    rng = np.random.default_rng(seed)
+    pts = np.vstack(
+        [
+            _pipe_points(rng, [0, 0.9], [LENGTH, 0.9], 0.0243, 3000),
+            _pipe_points(rng, [0, 0.2], [LENGTH, 0.2], 0.0243, 3000),
+            _arch(rng, [1.0, 0.2], 0.55, 0.014, 4000),
+            _arch(rng, [1.0, 0.2], 0.34, 0.012, 2500),
+            _pole_points(rng, 0.0),
+            _pole_points(rng, LENGTH),
+        ]
+    )
+    rec = reconstruct_pipes(pts, LENGTH, POLE_R)
+    assert [p.kind for p in rec.pipes] == ["horizontal", "horizontal", "curved", "curved"]
+    for rail in rec.pipes[:2]:
+        assert rail.axis[[0, -1], 0] == pytest.approx([0.0, LENGTH], abs=1e-6)
+        assert abs(rail.radius - 0.0243) < 0.0015
+    for arch, radius in zip(rec.pipes[2:], (0.55, 0.34), strict=True):
+        feet = arch.axis[[0, -1], 0]
+        assert np.abs(np.sort(feet) - [1.0 - radius, 1.0 + radius]).max() < 0.12
+
+
 def test_no_points_gives_a_note_not_a_crash():
     rec = reconstruct_pipes(np.zeros((0, 3)), LENGTH, POLE_R)
     assert rec.pipes == () and rec.notes

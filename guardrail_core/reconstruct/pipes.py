@@ -18,9 +18,11 @@ The steps follow §4.3:
    current direction so that crossing pipes continue straight through the crossing;
 5. polylines are smoothed by Taubin's low-pass filter, fitted by a straight line when nearly
    straight, snapped to horizontal when nearly horizontal;
-6. ends near a pole are extended to the pole axis; ends near another pipe are extended to their
-   intersection;
-7. the radius and the axis depth z of each pipe are measured from its points.
+6. a chain's end that runs on along a rail past their junction is cut and given back to the
+   rail; ends near a pole are extended to the pole axis; ends near another pipe are extended to
+   their intersection;
+7. the radius and the axis depth z of each pipe are measured from its points, per 0.1 m
+   stretch along it (the median over the stretches: a junction sways a few of them).
 
 Geometry of the points on a pipe (used in 2 and 7): the scanner sees the +z face. Rays sample a
 pipe about uniformly in the offset across it, so the signed in-plane offsets of its points from the
@@ -114,7 +116,9 @@ class PipeParams:
     horizontal_angle : float, deg
         A straight line within this angle of the horizontal is a horizontal pipe.
     pole_extension : float, m
-        Ends within this x distance of a pole axis are extended to it.
+        Ends within this x distance of a pole axis are extended to it (a rail always; a
+        diagonal or curved pipe only if it meets no other pipe on the way). An arch's foot
+        takes the last ~0.4 m of its rail's points, which the rail then has to bridge.
     join_distance : float, m
         Ends within this distance of another pipe (or of its extension) are extended or trimmed
         to the intersection.
@@ -131,6 +135,13 @@ class PipeParams:
         Points within ``r + assign_margin`` of an axis (in x, y) belong to the pipe.
     measure_step : float, m
         Spacing of the skeleton samples that point offsets are measured against.
+    measure_stretch : float, m
+        A pipe's radius and axis are measured per stretch of this length along it, and the
+        median over the stretches taken, so that the points of a pipe joining it, which crowd
+        one side near the junction, sway a few stretches and not the measure.
+    measure_stretch_points : int
+        Fewest points for a stretch to be measured; with fewer than three such stretches the
+        pipe is measured on all its points at once.
     """
 
     pole_margin: float = 0.015
@@ -154,7 +165,7 @@ class PipeParams:
     straight_tolerance: float = 0.01
     straight_share: float = 0.75
     horizontal_angle: float = 3.0
-    pole_extension: float = 0.35
+    pole_extension: float = 0.45
     join_distance: float = 0.25
     merge_gap: float = 0.3
     merge_angle: float = 50.0
@@ -162,6 +173,8 @@ class PipeParams:
     min_length: float = 0.1
     assign_margin: float = 0.01
     measure_step: float = 0.005
+    measure_stretch: float = 0.1
+    measure_stretch_points: int = 20
     line_band: float = 0.03
     line_min_length: float = 0.3
     line_chunk: float = 0.1
@@ -364,7 +377,12 @@ def reconstruct_pipes(
     rest_idx = rest_idx[~line_mask]
     others = _non_vertical_pipes(pts, rest_idx, x0, p, notes)
 
-    skels = verticals + lines + [s for s in others if not _runs_along(s, lines, p)]
+    others = [s for s in others if not _runs_along(s, lines, p)]
+    rails = lines + [s for s in others if s.kind == "horizontal"]
+    for s in others:
+        if s.kind != "horizontal":
+            _trim_along(s, rails, length, p)
+    skels = verticals + lines + others
     # §4.3: ends extended to the poles, and to the intersection of close ends.
     _extend_and_join(skels, length, p)
     # Radius and depth of each pipe from its points.
@@ -589,6 +607,52 @@ def _runs_along(s: _Skel, lines: list[_Skel], p: PipeParams) -> bool:
         if np.mean(dist <= p.link_distance) >= 0.5:
             return True
     return False
+
+
+def _trim_along(s: _Skel, lines: list[_Skel], length: float, p: PipeParams) -> None:
+    """Cut the ends of a chained skeleton that run along a rail (a straight pipe, taken from
+    pole to pole), within ``line_band`` of it for ``join_distance / 5`` or more: past a junction
+    the chain took over the rail's points (an arch's foot running on along its rail). The rail
+    runs on through them: its end is moved out to the last of them. The cut end is joined to the
+    rail again by :func:`_extend_and_join`."""
+    if not lines or len(s.xy) < 3:
+        return
+    near = np.full(len(s.xy), -1)
+    best = np.full(len(s.xy), np.inf)
+    for j, line in enumerate(lines):
+        a, b = line.xy[0], line.xy[-1]
+        u = (b - a) / max(float(np.linalg.norm(b - a)), 1e-12)
+        if abs(u[0]) < 0.1:
+            continue
+        reach = np.vstack([a + (0.0 - a[0]) / u[0] * u, a + (length - a[0]) / u[0] * u])
+        dist = _distance_to_polyline(s.xy, reach)[0]
+        closer = (dist <= p.line_band) & (dist < best)
+        near[closer], best[closer] = j, dist[closer]
+    along = near >= 0
+    if along.all() or not along.any():
+        return
+    step = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(s.xy, axis=0), axis=1))])
+    first, last = int(np.argmin(along)), len(along) - 1 - int(np.argmin(along[::-1]))
+    cut_head = step[first] >= p.join_distance / 5
+    cut_tail = step[-1] - step[last] >= p.join_distance / 5
+    if (cut_head or cut_tail) and (last if cut_tail else len(along) - 1) > (
+        first if cut_head else 0
+    ):
+        for tip, cut in ((0, cut_head), (-1, cut_tail)):
+            if cut:
+                _run_on(lines[int(near[tip])], s.xy[tip])
+        s.xy = s.xy[(first if cut_head else 0) : (last + 1 if cut_tail else len(along))]
+
+
+def _run_on(line: _Skel, point: np.ndarray) -> None:
+    """Move the nearer end of a straight skeleton out to ``point`` projected on it, if beyond."""
+    a, b = line.xy[0], line.xy[-1]
+    u = (b - a) / max(float(np.linalg.norm(b - a)), 1e-12)
+    t = float((point - a) @ u)
+    if t > float((b - a) @ u):
+        line.xy = np.vstack([line.xy[:-1], a + t * u])
+    elif t < 0:
+        line.xy = np.vstack([a + t * u, line.xy[1:]])
 
 
 def _refine_line(
@@ -1060,8 +1124,9 @@ def _set_end(s: _Skel, end: int, point: np.ndarray, p: PipeParams) -> None:
 def _extend_and_join(skels: list[_Skel], length: float, p: PipeParams) -> None:
     """§4.3: extend ends close to a pole to its axis, and close ends to their intersection.
 
-    An end within ``pole_extension`` (in x) of a pole axis, heading toward it, goes to the axis.
-    Any other end is moved along its direction to the nearest crossing with another skeleton (or
+    An end within ``pole_extension`` (in x) of a pole axis, heading toward it, goes to the axis,
+    unless it meets another skeleton on the way. Any other end is moved along its direction to
+    the nearest crossing with another skeleton (or
     with the extension of that skeleton's end, which is then extended too) within
     ``join_distance`` ahead, or within half of it behind (a trim: the points of a vertical pipe
     reach beyond the axis of the rail it stands on).
@@ -1071,14 +1136,6 @@ def _extend_and_join(skels: list[_Skel], length: float, p: PipeParams) -> None:
             tip = s.xy[end]
             d = _end_direction(s.xy, p, end=end == -1)
             pole_x = 0.0 if d[0] < 0 else length
-            if (
-                s.kind != "vertical"
-                and abs(tip[0] - pole_x) <= p.pole_extension
-                and abs(d[0]) > 0.1
-            ):
-                # §4.3: close to a pole: extended to the pole.
-                _set_end(s, end, tip + (pole_x - tip[0]) / d[0] * d, p)
-                continue
             best_s, best_j, best_t, best_k = math.inf, -1, 0.0, 0
             for j, o in enumerate(skels):
                 if j == i:
@@ -1088,6 +1145,18 @@ def _extend_and_join(skels: list[_Skel], length: float, p: PipeParams) -> None:
                     continue
                 if abs(sr) < abs(best_s):
                     best_s, best_j, best_t, best_k = sr, j, t, k
+            to_pole = (pole_x - tip[0]) / d[0] if abs(d[0]) > 0.1 else math.inf
+            near_pole = s.kind != "vertical" and abs(tip[0] - pole_x) <= p.pole_extension
+            # A diagonal or curved pipe that meets another before the pole ends there (a
+            # diamond's diagonal on its rail), unless at the pole itself (diagonals from the
+            # corners); rails run from pole to pole through their junctions.
+            meets_first = (
+                s.kind != "horizontal" and best_j >= 0 and best_s < to_pole - p.join_distance / 5
+            )
+            if near_pole and math.isfinite(to_pole) and not meets_first:
+                # §4.3: close to a pole: extended to the pole.
+                _set_end(s, end, tip + to_pole * d, p)
+                continue
             if best_j < 0:
                 continue
             # §4.3: close ends are extended to their intersection.
@@ -1115,8 +1184,11 @@ def _dense(xy: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
     return v, np.column_stack([-tang[:, 1], tang[:, 0]])
 
 
-def _offsets(q: np.ndarray, xy: np.ndarray, p: PipeParams) -> tuple[np.ndarray, np.ndarray]:
-    """Distance (M,) of points q (M, 2) to a skeleton and their signed offset across it (left +).
+def _offsets(
+    q: np.ndarray, xy: np.ndarray, p: PipeParams
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Distance (M,) of points q (M, 2) to a skeleton, their signed offset across it (left +)
+    and their station along it (M,), metres from its first vertex.
 
     Points whose nearest skeleton place is an end vertex beyond which they lie get an infinite
     distance (they are not beside the pipe).
@@ -1126,7 +1198,26 @@ def _offsets(q: np.ndarray, xy: np.ndarray, p: PipeParams) -> tuple[np.ndarray, 
     off = np.einsum("ij,ij->i", q - v[k], nrm[k])
     along = np.abs(np.einsum("ij,ij->i", q - v[k], nrm[k][:, ::-1] * [1.0, -1.0]))
     dist = np.where(along > p.measure_step, np.inf, dist)
-    return dist, off
+    return dist, off, k * p.measure_step
+
+
+def _width_and_centre(off: np.ndarray, station: np.ndarray, p: PipeParams) -> tuple[float, float]:
+    """Half-width (the radius) and centre (metres) of a pipe's signed offsets: the central
+    ``radius_share`` of each ``measure_stretch`` along it, medians over the stretches (all the
+    offsets at once where fewer than three stretches hold ``measure_stretch_points``)."""
+    stretch = np.floor(station / p.measure_stretch).astype(np.int64)
+    order = np.argsort(stretch, kind="stable")
+    cuts = np.flatnonzero(np.diff(stretch[order])) + 1
+    widths, centres = [], []
+    for group in np.split(order, cuts):  # per stretch (~20 per pipe)
+        if len(group) >= p.measure_stretch_points:
+            lo, hi = _central_quantiles(off[group], p.radius_share)
+            widths.append(0.5 * (hi - lo) / p.radius_share)
+            centres.append(0.5 * (lo + hi))
+    if len(widths) < 3:
+        lo, hi = _central_quantiles(off, p.radius_share)
+        return 0.5 * (hi - lo) / p.radius_share, 0.5 * (lo + hi)
+    return float(np.median(widths)), float(np.median(centres))
 
 
 def _measure_all(pts: np.ndarray, skels: list[_Skel], p: PipeParams) -> None:
@@ -1135,8 +1226,9 @@ def _measure_all(pts: np.ndarray, skels: list[_Skel], p: PipeParams) -> None:
     A pipe's points are those within ``r + assign_margin`` of its skeleton and not within
     ``r + assign_margin`` of another pipe's (junctions and crossings count for neither). The
     central ``radius_share`` of their signed offsets gives the radius (half-width / share) and
-    the axis (the midpoint: the skeleton is moved across by it); each point then gives the axis
-    depth ``z - sqrt(r**2 - o**2)``, and the median of these is taken (see the module notes).
+    the axis (the midpoint: the skeleton is moved across by it), per stretch along the pipe and
+    the median over the stretches; each point then gives the axis depth
+    ``z - sqrt(r**2 - o**2)``, and the median of these is taken (see the module notes).
     """
     if not skels:
         return
@@ -1144,41 +1236,38 @@ def _measure_all(pts: np.ndarray, skels: list[_Skel], p: PipeParams) -> None:
     # First guess: the points the chain was built from.
     radius = np.zeros(len(skels))
     for i, s in enumerate(skels):
-        _, off = _offsets(xy[s.idx], s.xy, p) if len(s.idx) else (None, np.zeros(0))
-        off = off[np.isfinite(off)] if off is not None else off
-        radius[i] = _half_width(off, p) if len(off) >= 3 else p.assign_margin
+        if len(s.idx) >= 3:
+            _, off, station = _offsets(xy[s.idx], s.xy, p)
+            radius[i] = _width_and_centre(off, station, p)[0]
+        else:
+            radius[i] = p.assign_margin
     for _ in range(2):
         dist = np.full((len(skels), len(pts)), np.inf)
         offs = np.zeros((len(skels), len(pts)))
+        stations = np.zeros((len(skels), len(pts)))
         for i, s in enumerate(skels):
             lo = s.xy.min(axis=0) - radius[i] - p.assign_margin - p.measure_step
             hi = s.xy.max(axis=0) + radius[i] + p.assign_margin + p.measure_step
             cand = np.flatnonzero(np.all((xy >= lo) & (xy <= hi), axis=1))
             if len(cand):
-                dist[i, cand], offs[i, cand] = _offsets(xy[cand], s.xy, p)
+                dist[i, cand], offs[i, cand], stations[i, cand] = _offsets(xy[cand], s.xy, p)
         inside = dist <= (radius + p.assign_margin)[:, None]
         exclusive = inside & (inside.sum(axis=0) == 1)[None, :]
         for i, s in enumerate(skels):
-            o = offs[i, exclusive[i]]
-            if len(o) < 3:
+            sel = exclusive[i]
+            if sel.sum() < 3:
                 continue
-            lo_q, hi_q = _central_quantiles(o, p.radius_share)
-            radius[i] = 0.5 * (hi_q - lo_q) / p.radius_share
-            _shift_polyline(s, 0.5 * (lo_q + hi_q))
+            radius[i], centre = _width_and_centre(offs[i, sel], stations[i, sel], p)
+            _shift_polyline(s, centre)
     for i, s in enumerate(skels):
         sel = exclusive[i]
         s.n_points = int(sel.sum())
         s.radius = float(radius[i])
         if s.n_points == 0:
             continue
-        _, o = _offsets(xy[sel], s.xy, p)
+        _, o, _ = _offsets(xy[sel], s.xy, p)
         depth = pts[sel, 2] - np.sqrt(np.clip(s.radius**2 - o**2, 0.0, None))
         s.z = float(np.median(depth))
-
-
-def _half_width(off: np.ndarray, p: PipeParams) -> float:
-    lo, hi = _central_quantiles(off, p.radius_share)
-    return 0.5 * (hi - lo) / p.radius_share
 
 
 def _shift_polyline(s: _Skel, shift: float) -> None:
