@@ -150,3 +150,13 @@ def test_clutter_at_one_x_or_far_below_is_not_the_beam():
     naive = BeamParams(min_x_spread=0.0, max_band_gap=1.0)
     loose = reconstruct_beam(np.vstack([pts, column, ground]), LENGTH, POST_R, naive)
     assert loose.section[:, 1].min() < truth[:, 1].min() - 0.1
+
+
+def test_a_shadowed_bottom_flank_is_mirrored_down_to_the_plates_edge():
+    # The scanner looks down on the beam: from 15 mm below its lowest crest nothing is seen.
+    rng = np.random.default_rng(6)
+    pts, truth = _beam_points(rng, n=8000)
+    crest = truth[np.argmax(truth[:, 0] * (truth[:, 1] < 0.6)), 1]  # the lower ridge's crest
+    rec = reconstruct_beam(pts[pts[:, 1] > crest - 0.015], LENGTH, POST_R)
+    assert abs(rec.section[0, 1] - truth[0, 1]) < 0.004  # down to the edge, not short of it
+    assert _hausdorff(rec.section, truth) < 0.008

@@ -19,6 +19,9 @@ from guardrail_core.errors import ReconstructionError
 from guardrail_core.reconstruct.pipes import check_unit_points
 from guardrail_core.reconstruct.smoothing import check_taubin_params, taubin_smooth
 
+#: Metres. Past a crest, the flank's valley is where z has risen this much above its lowest.
+VALLEY_RISE_M = 0.005
+
 __all__ = ["BeamParams", "BeamReconstruction", "reconstruct_beam", "unit_type"]
 
 
@@ -377,7 +380,9 @@ def _fill_shadowed(section: np.ndarray, p: BeamParams) -> np.ndarray:
     def mirrored(c: int, lo: float, hi: float) -> np.ndarray:
         up = section[c:]
         m = np.column_stack([up[:, 0], 2.0 * y[c] - up[:, 1]])
-        return m[(m[:, 1] > lo) & (m[:, 1] < hi)]
+        # lo is inclusive: below the lowest vertex it is the mirror of the valley that ends the
+        # upper flank, the plate's edge.
+        return m[(m[:, 1] >= lo) & (m[:, 1] < hi)]
 
     for g in np.flatnonzero(np.diff(y) > p.shadow_gap):
         c = crest_above(int(g) + 1)
@@ -385,10 +390,12 @@ def _fill_shadowed(section: np.ndarray, p: BeamParams) -> np.ndarray:
             pieces.append(mirrored(c, y[g], y[g + 1]))
     if z[0] > z_mid:
         c = crest_above(0)
-        # mirror down to the next valley above the crest (where the upper flank ends)
-        k = c
-        while k + 1 < len(z) and z[k + 1] <= z[k]:
-            k += 1
+        # mirror down to the next valley above the crest (where the upper flank ends): the
+        # deepest vertex before z rises again by more than the slices' noise
+        k = j = c
+        while j + 1 < len(z) and z[j + 1] <= z[k] + VALLEY_RISE_M:
+            j += 1
+            k = j if z[j] < z[k] else k
         pieces.append(mirrored(c, 2.0 * y[c] - y[k], y[0]))
     out = np.vstack(pieces)
     return out[np.argsort(out[:, 1], kind="stable")]
