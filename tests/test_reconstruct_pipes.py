@@ -190,3 +190,33 @@ def test_bad_unit_raises(length, pole_radius):
 def test_params_out_of_range_raise(kwargs):
     with pytest.raises(ReconstructionError):
         PipeParams(**kwargs)
+
+
+def test_a_crossing_where_one_chain_bounced_off_the_other_is_repaired():
+    # An X of two diagonals whose chains of slice centres went wrong at the crossing: one runs
+    # up and back down (a Λ), the other two halves stop and start near its apex.
+    from guardrail_core.reconstruct.pipes import _Track, _uncross
+
+    def track(xs, line):
+        t = _Track(0, xs[0], line(xs[0]), 0, 10.0)
+        for k, x in enumerate(xs[1:], start=1):
+            t.add(k, x, line(x), k, 10.0, False)
+        return t
+
+    def up(x):
+        return 0.2 + 0.3 * x
+
+    def down(x):
+        return 0.8 - 0.3 * x
+
+    step = PipeParams().slice_interval
+    bounce = track(np.arange(0.05, 1.9, step), lambda x: up(x) if x <= 1.0 else down(x))
+    first_down = track(np.arange(0.05, 0.9, step), down)
+    second_up = track(np.arange(1.12, 1.9, step), up)
+    tracks = _uncross([bounce, first_down, second_up], PipeParams())
+    assert len(tracks) == 2
+    for t, line in ((first_down, down), (bounce, up)):  # each one straight line, end to end
+        assert t.x[0] < 0.1 and t.x[-1] > 1.8
+        x, error = np.array(t.x), np.abs(np.array(t.y) - [line(x) for x in t.x])
+        assert error[np.abs(x - 1.0) > 0.05].max() < 1e-9  # the apex centre is on both
+        assert error.max() < 0.03

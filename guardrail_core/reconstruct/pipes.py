@@ -15,7 +15,8 @@ The steps follow §4.3:
    (2-D Delaunay on (x, y)), edges longer than a cut length removed, and the centre of each
    connected component taken (Fig. 16 a-c);
 4. centres of consecutive slices are joined into polylines (Fig. 16 d), predicting along the
-   current direction so that crossing pipes continue straight through the crossing;
+   current direction so that crossing pipes continue straight through the crossing; where one
+   still bounced off the other (an X linked as a Λ and two halves), they are re-linked;
 5. polylines are smoothed by Taubin's low-pass filter, fitted by a straight line when nearly
    straight, snapped to horizontal when nearly horizontal;
 6. a chain's end that runs on along a rail past their junction is cut and given back to the
@@ -855,7 +856,7 @@ def _non_vertical_pipes(
     cs[labels] = s
     # §4.3, Fig. 16(d): neighbouring centres joined into polylines.
     tracks = _link_centres(cs, cx, cy, cw, p)
-    tracks = _merge_tracks(tracks, p)
+    tracks = _uncross(_merge_tracks(tracks, p), p)
     members = np.argsort(labels, kind="stable")
     comp_start = np.concatenate([[0], np.cumsum(cw.astype(np.int64))])
 
@@ -911,6 +912,87 @@ def _merge_tracks(tracks: list[_Track], p: PipeParams) -> list[_Track]:
                 merged = True
                 break
             if merged:
+                break
+    return tracks
+
+
+def _side_angle(t: _Track, x0: float, x1: float) -> float:
+    """Direction (radians from +x) of a track's own centres with x0 <= x <= x1; nan if < 3."""
+    k = [i for i in range(len(t.x)) if x0 <= t.x[i] <= x1 and not t.shared[i]]
+    if len(k) < 3:
+        return math.nan
+    xs, ys = np.array([t.x[i] for i in k]), np.array([t.y[i] for i in k])
+    return math.atan(float(np.polyfit(xs, ys, 1)[0]))
+
+
+def _append(a: _Track, b: _Track, start: int = 0) -> None:
+    """Append b's centres from ``start`` on to a."""
+    for name in ("s", "x", "y", "w", "comps", "shared"):
+        getattr(a, name).extend(getattr(b, name)[start:])
+
+
+def _uncross(tracks: list[_Track], p: PipeParams) -> list[_Track]:
+    """Repair crossings where a polyline bounced off the other pipe instead of crossing it.
+
+    The linking predicts straight on through a crossing, but where one side is thin there a
+    polyline can turn into the other pipe's far half: an X becomes a Λ (or V) and two halves,
+    one ending and one starting near the Λ's apex. Where the halves continue the Λ's two arms
+    straighter than the Λ turns (by ``link_same_angle`` at least, directions fitted within
+    ``direction_window`` either side), they are joined to them instead.
+    """
+    margin = p.link_distance + p.slice_interval
+    w = p.direction_window
+    repaired = True
+    while repaired:
+        repaired = False
+        for t in tracks:
+            if len(t.x) < 3:
+                continue
+            for k in range(1, len(t.x) - 1):  # per centre: is it the apex of a bounce?
+                x, y = t.x[k], t.y[k]
+                head = _side_angle(t, x - margin - w, x - margin)
+                tail = _side_angle(t, x + margin, x + margin + w)
+                if not (np.isfinite(head) and np.isfinite(tail)):
+                    continue
+                turn = abs(head - tail)
+                if turn < 2 * math.radians(p.link_same_angle):
+                    continue
+                ends = [
+                    u for u in tracks
+                    if u is not t and u.x[-1] < x
+                    and math.hypot(u.x[-1] - x, u.y[-1] - y) <= p.join_distance
+                ]  # fmt: skip
+                starts = [
+                    v for v in tracks
+                    if v is not t and v.x[0] > x
+                    and math.hypot(v.x[0] - x, v.y[0] - y) <= p.join_distance
+                ]  # fmt: skip
+                best = None
+                for u in ends:
+                    u_dir = _side_angle(u, u.x[-1] - w, u.x[-1])
+                    for v in starts:
+                        if v is u:
+                            continue
+                        v_dir = _side_angle(v, v.x[0], v.x[0] + w)
+                        bent = abs(u_dir - tail) + abs(head - v_dir)
+                        if np.isfinite(bent) and bent <= turn - math.radians(p.link_same_angle):
+                            if best is None or bent < best[0]:
+                                best = (bent, u, v)
+                if best is None:
+                    continue
+                _, u, v = best
+                # The apex: the highest centre near here of a Λ, the lowest of a V.
+                near = [i for i in range(len(t.x)) if abs(t.x[i] - x) <= margin]
+                sign = 1.0 if head > tail else -1.0
+                k = max(near, key=lambda i: sign * t.y[i])
+                _append(u, t, k + 1)  # the ending half runs on into the Λ's second arm
+                for name in ("s", "x", "y", "w", "comps", "shared"):
+                    setattr(t, name, getattr(t, name)[: k + 1])
+                _append(t, v)  # the Λ's first arm runs on into the starting half
+                tracks.remove(v)
+                repaired = True
+                break
+            if repaired:
                 break
     return tracks
 
