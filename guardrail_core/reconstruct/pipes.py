@@ -903,13 +903,7 @@ def _merge_tracks(tracks: list[_Track], p: PipeParams) -> list[_Track]:
                 step = np.array([b.x[0] - a.x[-1], b.y[0] - a.y[-1]]) / max(gap, 1e-9)
                 if da @ step < 0.7 or -db @ step < 0.7:
                     continue
-                for k in range(len(b.x)):
-                    a.s.append(b.s[k])
-                    a.x.append(b.x[k])
-                    a.y.append(b.y[k])
-                    a.w.append(b.w[k])
-                    a.comps.append(b.comps[k])
-                    a.shared.append(b.shared[k])
+                _append(a, b)
                 tracks.pop(j)
                 merged = True
                 break
@@ -927,9 +921,12 @@ def _side_angle(t: _Track, x0: float, x1: float) -> float:
     return math.atan(float(np.polyfit(xs, ys, 1)[0]))
 
 
+_TRACK_FIELDS = ("s", "x", "y", "w", "comps", "shared")  # a _Track's per-centre lists
+
+
 def _append(a: _Track, b: _Track, start: int = 0) -> None:
     """Append b's centres from ``start`` on to a."""
-    for name in ("s", "x", "y", "w", "comps", "shared"):
+    for name in _TRACK_FIELDS:
         getattr(a, name).extend(getattr(b, name)[start:])
 
 
@@ -988,7 +985,7 @@ def _uncross(tracks: list[_Track], p: PipeParams) -> list[_Track]:
                 sign = 1.0 if head > tail else -1.0
                 k = max(near, key=lambda i: sign * t.y[i])
                 _append(u, t, k + 1)  # the ending half runs on into the Λ's second arm
-                for name in ("s", "x", "y", "w", "comps", "shared"):
+                for name in _TRACK_FIELDS:
                     setattr(t, name, getattr(t, name)[: k + 1])
                 _append(t, v)  # the Λ's first arm runs on into the starting half
                 tracks.remove(v)
