@@ -250,7 +250,12 @@ def reconstruct_run(
     if max_units is not None:
         chosen = chosen[:max_units]
     used = [unit_points[u] for u in chosen]
-    superimposed = superimpose(used, params.register)
+    length = float(np.median([f.length for f in frames]))
+    register = params.register
+    stacked = np.concatenate(used)
+    if len(used) > 1 and len(stacked) and unit_type(stacked, length, params.beams) == "beam":
+        register = dataclasses.replace(register, max_translation_m=register.beam_max_translation_m)
+    superimposed = superimpose(used, register)
     superimposed = dataclasses.replace(
         superimposed, unit_of_point=chosen[superimposed.unit_of_point].astype(np.int32)
     )
@@ -266,7 +271,7 @@ def reconstruct_run(
         return RunModel(run_id, poles, frames, None, registered, len(xyz), notes), superimposed
     model = unit_model(
         superimposed.points,
-        float(np.median([f.length for f in frames])),
+        length,
         pole_radius=float(np.median([p.radius for p in poles])),
         pole_height=float(np.median([p.height for p in poles])),
         n_units=len(used),

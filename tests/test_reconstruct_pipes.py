@@ -140,6 +140,34 @@ def test_an_arch_foot_does_not_take_over_its_rail(seed):
         assert np.abs(np.sort(feet) - [1.0 - radius, 1.0 + radius]).max() < 0.12
 
 
+@pytest.mark.parametrize("seed", range(6))
+def test_an_arch_king_post_is_found_from_few_units(seed):
+    # The design pipe_arch from 8 superimposed units: a 0.15 m king post between the outer
+    # arch's crown and the top rail, its ~60 points in patches a few mm apart in x (the
+    # units' registration). In the histogram of all points it barely rises above the rails.
+    rng = np.random.default_rng(seed)
+    post = _pipe_points(rng, [1.0, 0.75], [1.0, 0.9], 0.012, 64)
+    post[:, 0] += np.repeat(rng.uniform(-0.005, 0.005, 8), 8)
+    pts = np.vstack(
+        [
+            _pipe_points(rng, [0, 0.9], [LENGTH, 0.9], 0.0243, 1600),
+            _pipe_points(rng, [0, 0.2], [LENGTH, 0.2], 0.0243, 1600),
+            _arch(rng, [1.0, 0.2], 0.55, 0.014, 1000),
+            _arch(rng, [1.0, 0.2], 0.35, 0.012, 700),
+            post,
+            _pole_points(rng, 0.0),
+            _pole_points(rng, LENGTH),
+        ]
+    )
+    rec = reconstruct_pipes(pts, LENGTH, POLE_R)
+    kinds = [p.kind for p in rec.pipes]
+    assert kinds == ["horizontal", "horizontal", "vertical", "curved", "curved"]
+    [king] = [p for p in rec.pipes if p.kind == "vertical"]
+    assert abs(king.axis[0, 0] - 1.0) < 0.005
+    assert np.abs(np.sort(king.axis[:, 1]) - [0.75, 0.9]).max() < 0.03
+    assert abs(king.radius - 0.012) < 0.004
+
+
 def test_no_points_gives_a_note_not_a_crash():
     rec = reconstruct_pipes(np.zeros((0, 3)), LENGTH, POLE_R)
     assert rec.pipes == () and rec.notes

@@ -29,7 +29,8 @@ def test_icp_recovers_a_known_small_offset():
     units = _units()
     shift = np.array([0.012, -0.008, 0.01])
     units[2] = _moved(units[2], shift, angle_deg=0.3)
-    sup = superimpose(units)
+    # 1.8 cm is beyond the default bound of a pipe unit (5 mm) but within a beam unit's.
+    sup = superimpose(units, RegisterParams(max_translation_m=0.03))
     assert sup.registered.all()
     # The correction maps the moved unit back: a unit point goes back to where it was.
     back = units[2] @ sup.transforms[2][:3, :3].T + sup.transforms[2][:3, 3]
@@ -48,7 +49,7 @@ def test_icp_recovers_a_known_small_offset():
 def test_reference_unit_mode():
     units = _units(seed=1)
     units[4] = units[4] + [0.0, 0.01, -0.01]
-    sup = superimpose(units, reference=0)
+    sup = superimpose(units, RegisterParams(max_translation_m=0.03), reference=0)
     np.testing.assert_allclose(sup.transforms[0], np.eye(4))
     np.testing.assert_allclose(sup.transforms[4][:3, 3], [0.0, -0.01, 0.01], atol=0.004)
 

@@ -17,13 +17,14 @@ from guardrail_core.drive import Drive
 from guardrail_core.errors import InvalidOptionError
 from guardrail_core.evaluate import evaluate_run
 from guardrail_core.reconstruct.inventory import inventory_rows
+from guardrail_core.reconstruct.register import RegisterParams
 from guardrail_core.reconstruction import (
     RECONSTRUCTION_DIR,
     ReconstructionParams,
     load_reconstruction,
     reconstruct_run,
 )
-from guardrail_core.run_folder import load_run
+from guardrail_core.run_folder import POINT_ROAD, load_run
 from tests.reconstruct_fixtures import make_run
 
 
@@ -175,3 +176,33 @@ def test_a_unit_without_points_between_its_poles_gives_poles_only() -> None:
     assert row["status"] == "poles only"
     assert row["pole_count"] == 3
     assert "no pipe reconstructed" in row["notes"]
+
+
+def test_icp_may_slide_beam_units_along_x_but_not_pipe_units(
+    drive: Drive, run_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # ICP's correction is bounded by 5 mm for a pipe unit (sliding along the rails loses the x
+    # of verticals and arches) and by 3 cm for a beam unit (its section is the same along x).
+    import guardrail_core.reconstruction as reconstruction
+
+    bounds: list[float] = []
+    real = reconstruction.superimpose
+
+    def spy(units, params, *args, **kwargs):
+        bounds.append(params.max_translation_m)
+        return real(units, params, *args, **kwargs)
+
+    monkeypatch.setattr(reconstruction, "superimpose", spy)
+    run = load_run(run_path)
+    rec = reconstruction.reconstruct_guardrails(
+        drive.points.xyz,
+        reconstruction.guardrail_mask(run.point_segment, run.segments["label"]),
+        run.point_segment == POINT_ROAD,
+        drive.trajectory.position,
+    )
+    kinds = [r.model.type for r in rec.runs if r.model is not None]
+    assert sorted(kinds) == ["beam", "pipe"]
+    expected = {"beam": 0.03, "pipe": 0.005}
+    assert bounds == [expected[k] for k in kinds]
+    assert RegisterParams().max_translation_m == 0.005
+    assert RegisterParams().beam_max_translation_m == 0.03

@@ -10,7 +10,10 @@ The steps follow §4.3:
 1. points within the poles (x near 0 and ``length``) are dropped;
 2. vertical pipes: a histogram of x; contiguous regions above a threshold are candidate vertical
    pipes; the diameter is the width holding a share of their points, the skeleton sits at the
-   centre of that width and spans the points' height (Fig. 14, 15);
+   centre of that width and spans the points' height (Fig. 14, 15). Straight pipes are then
+   found by a line search; short vertical pipes between two others (an arch's king post), which
+   barely rise above the rails in the histogram, are found in the histogram of the points off
+   the straight pipes, and kept where pipes run across both their ends;
 3. their points are removed; the rest is cut into 30 mm slices along x, each slice triangulated
    (2-D Delaunay on (x, y)), edges longer than a cut length removed, and the centre of each
    connected component taken (Fig. 16 a-c);
@@ -145,6 +148,27 @@ class PipeParams:
     measure_stretch_points : int
         Fewest points for a stretch to be measured; with fewer than three such stretches the
         pipe is measured on all its points at once.
+    short_window : float, m
+        Short vertical pipes (an arch's king post, see ``_short_verticals``): the width their
+        histogram is summed over, the least half-width of their window, and the gap beyond
+        their radius where the pipes crossing their ends are looked for.
+    short_drift : float, m
+        The most a short vertical pipe's points may drift in x over its height (a linear fit;
+        units registered to a few mm leave ~1 cm on a 0.15 m pipe, a fixed angle would not do).
+    line_band : float, m
+        Straight pipes (``_straight_pipes``): half-width of a line hypothesis's band of points.
+    line_min_length : float, m
+        Shortest gap-free run of a straight pipe.
+    line_chunk : float, m
+        Length of the pieces a run is cut into to check it is populated and straight.
+    line_straightness : float, m
+        A piece's median offset may differ from the run's by this much (on more than a fifth of
+        the pieces, the run is curved). A rail superimposed from 8-12 units can bow by
+        6 mm; an arch's crown deviates by 1-3 cm.
+    line_occupancy : float in (0, 1]
+        Share of pieces holding two points or more.
+    line_hypotheses : int
+        Line hypotheses (pairs of points) drawn per search.
     """
 
     pole_margin: float = 0.015
@@ -178,10 +202,12 @@ class PipeParams:
     measure_step: float = 0.005
     measure_stretch: float = 0.1
     measure_stretch_points: int = 20
+    short_window: float = 0.015
+    short_drift: float = 0.015
     line_band: float = 0.03
     line_min_length: float = 0.3
     line_chunk: float = 0.1
-    line_straightness: float = 0.005
+    line_straightness: float = 0.008
     line_occupancy: float = 0.7
     line_hypotheses: int = 300
 
@@ -199,6 +225,8 @@ class PipeParams:
             "direction_window",
             "straight_tolerance",
             "min_length",
+            "short_window",
+            "short_drift",
             "merge_gap",
             "measure_step",
         )
@@ -378,6 +406,11 @@ def reconstruct_pipes(
     rest_idx = np.flatnonzero(~vertical_mask)
     lines, line_mask = _straight_pipes(pts, rest_idx, p)
     rest_idx = rest_idx[~line_mask]
+    # Short vertical pipes between two others (an arch's king post) stand out only once the
+    # rails' points are out of the histogram.
+    short, short_mask = _short_verticals(pts, rest_idx, lines, edges, p)
+    verticals += short
+    rest_idx = rest_idx[~short_mask]
     others = _non_vertical_pipes(pts, rest_idx, x0, p, notes)
 
     others = [s for s in others if not _runs_along(s, lines, p)]
@@ -443,37 +476,122 @@ def _vertical_pipes(
     for a, b in zip(starts, stops, strict=True):
         lo, hi = edges[a], edges[b]
         centre, half = 0.5 * (lo + hi), 0.5 * (hi - lo) + p.histogram_bin
-        sel = np.zeros(len(pts), dtype=bool)
+        found = None
         for _ in range(2):  # the window follows the estimated pipe width
-            sel = np.abs(x - centre) <= half
+            found = None
+            sel = (np.abs(x - centre) <= half) & ~removed  # a pipe split in two regions
             if sel.sum() < p.min_points:
                 break
             y0, y1 = _longest_chain(y[sel], p.vertical_gap)
             if y1 - y0 < p.vertical_min_length:
-                sel[:] = False
                 break
             inner = sel & (y > y0 + p.vertical_gap) & (y < y1 - p.vertical_gap)
             inner &= ~_horizontal_bands(y, inner, p)
             if inner.sum() < p.min_points:
-                sel[:] = False
                 break
             # A vertical pipe stands straight: x does not drift with y.
             slope = np.polyfit(y[inner], x[inner], 1)[0]
             if abs(slope) > tan_tol:
-                sel[:] = False
                 break
             qlo, qhi = _central_quantiles(x[inner], p.radius_share)
             centre = 0.5 * (qlo + qhi)
             radius = 0.5 * (qhi - qlo) / p.radius_share
             half = radius + p.assign_margin
-        if not sel.any():
+            found = (sel, centre, radius)
+        if found is None:
             continue
+        sel, centre, radius = found
         y0, y1 = _longest_chain(y[sel], p.vertical_gap)
+        # A short one ends on pipes running across; the steep foot of an arch goes on aside.
+        if y1 - y0 < 2 * p.vertical_min_length and not all(
+            _crossed(pts, centre, end, radius, p) for end in (y0, y1)
+        ):
+            continue
         band = sel & (y >= y0) & (y <= y1)
         removed |= band
         xy = np.array([[centre, y0], [centre, y1]])
         skels.append(_Skel(xy=xy, kind="vertical", idx=np.flatnonzero(band)))
     return skels, removed
+
+
+def _short_verticals(
+    pts: np.ndarray, rest_idx: np.ndarray, lines: list[_Skel], edges: np.ndarray, p: PipeParams
+) -> tuple[list[_Skel], np.ndarray]:
+    """Short vertical pipes between two pipes that run across them (an arch's king post).
+
+    In the x histogram of all points a 0.15 m vertical barely rises above the rails; here the
+    histogram holds only the points off the straight pipes, summed over ``short_window`` (the
+    points are few), with the threshold ``histogram_factor`` times its median over the filled
+    bins (the level of the curved pipes). A peak is a short vertical when its points stand
+    within ``short_drift`` of one x over at least ``vertical_min_length`` and both its ends meet
+    points on both sides (a pipe running across). The foot of an arch, as steep, fails that:
+    at its top the arch goes on to one side only.
+
+    Returns the vertical skeletons and a mask over ``rest_idx`` of their points.
+    """
+    mask = np.zeros(len(rest_idx), dtype=bool)
+    on_line = np.zeros(len(pts), dtype=bool)
+    for line in lines:
+        on_line[line.idx] = True
+    keep = ~on_line[rest_idx]
+    off = rest_idx[keep]
+    if len(off) < p.min_points:
+        return [], mask
+    n_bins = len(edges) - 1
+    b = np.minimum(((pts[off, 0] - edges[0]) / p.histogram_bin).astype(np.int64), n_bins - 1)
+    width = max(1, int(round(p.short_window / p.histogram_bin)))
+    counts = np.convolve(np.bincount(b, minlength=n_bins), np.ones(width), mode="same")
+    threshold = max(
+        p.histogram_factor * float(np.median(counts[counts > 0])), p.histogram_min_count
+    )
+    above = np.concatenate([[False], counts > threshold, [False]])
+    starts = np.flatnonzero(~above[:-1] & above[1:])
+    stops = np.flatnonzero(above[:-1] & ~above[1:])
+    x, y = pts[off, 0], pts[off, 1]
+    skels: list[_Skel] = []
+    taken = np.zeros(len(off), dtype=bool)
+    for a, b_ in zip(starts, stops, strict=True):
+        centre = 0.5 * (edges[a] + edges[b_])
+        half = max(0.5 * (edges[b_] - edges[a]), p.short_window)
+        found = None
+        for _ in range(2):  # the window follows the estimated pipe width
+            sel = (np.abs(x - centre) <= half) & ~taken
+            if sel.sum() < p.min_points:
+                break
+            y0, y1 = _longest_chain(y[sel], p.vertical_gap)
+            inner = sel & (y > y0 + p.slice_interval) & (y < y1 - p.slice_interval)
+            if y1 - y0 < p.vertical_min_length or inner.sum() < p.min_points:
+                break
+            slope = np.polyfit(y[inner], x[inner], 1)[0]
+            qlo, qhi = _central_quantiles(x[inner], p.radius_share)
+            centre, radius = 0.5 * (qlo + qhi), 0.5 * (qhi - qlo) / p.radius_share
+            half = radius + p.assign_margin
+            found = (y0, y1, radius, abs(slope) * (y1 - y0))
+        if found is None:
+            continue
+        y0, y1, radius, drift = found
+        if drift > p.short_drift or not all(
+            _crossed(pts, centre, end, radius, p) for end in (y0, y1)
+        ):
+            continue
+        band = (np.abs(x - centre) <= half) & (y >= y0) & (y <= y1) & ~taken
+        taken |= band
+        xy = np.array([[centre, y0], [centre, y1]])
+        skels.append(_Skel(xy=xy, kind="vertical", idx=off[band]))
+    mask[np.flatnonzero(keep)[taken]] = True
+    return skels, mask
+
+
+def _crossed(pts: np.ndarray, x: float, y: float, radius: float, p: PipeParams) -> bool:
+    """Whether points lie on both sides of (x, y) just beyond a vertical pipe of ``radius``
+    (within ``slice_interval`` in y, ``short_window`` to ``3 short_window`` out in x): a pipe
+    runs across the vertical's end there."""
+    near = np.abs(pts[:, 1] - y) <= p.slice_interval
+    dx = pts[near, 0] - x
+    lo, hi = radius + p.short_window, radius + 3 * p.short_window
+    left = int(((dx <= -lo) & (dx >= -hi)).sum())
+    right = int(((dx >= lo) & (dx <= hi)).sum())
+    return min(left, right) >= 3
 
 
 def _horizontal_bands(y: np.ndarray, sel: np.ndarray, p: PipeParams) -> np.ndarray:
