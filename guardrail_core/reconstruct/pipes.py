@@ -462,13 +462,17 @@ def _longest_chain(y: np.ndarray, gap: float) -> tuple[float, float]:
     return float(ys[starts[k]]), float(ys[ends[k]])
 
 
+def _regions_above(counts: np.ndarray, threshold: float) -> tuple[np.ndarray, np.ndarray]:
+    """First bins (starts) and bins one past the last (stops) of the runs above ``threshold``."""
+    above = np.concatenate([[False], counts > threshold, [False]])
+    return np.flatnonzero(~above[:-1] & above[1:]), np.flatnonzero(above[:-1] & ~above[1:])
+
+
 def _vertical_pipes(
     pts: np.ndarray, edges: np.ndarray, counts: np.ndarray, threshold: float, p: PipeParams
 ) -> tuple[list[_Skel], np.ndarray]:
     """Vertical pipes from the contiguous regions of the x histogram above ``threshold``."""
-    above = np.concatenate([[False], counts > threshold, [False]])
-    starts = np.flatnonzero(~above[:-1] & above[1:])
-    stops = np.flatnonzero(above[:-1] & ~above[1:])
+    starts, stops = _regions_above(counts, threshold)
     removed = np.zeros(len(pts), dtype=bool)
     skels: list[_Skel] = []
     tan_tol = math.tan(math.radians(p.vertical_angle))
@@ -544,9 +548,7 @@ def _short_verticals(
     threshold = max(
         p.histogram_factor * float(np.median(counts[counts > 0])), p.histogram_min_count
     )
-    above = np.concatenate([[False], counts > threshold, [False]])
-    starts = np.flatnonzero(~above[:-1] & above[1:])
-    stops = np.flatnonzero(above[:-1] & ~above[1:])
+    starts, stops = _regions_above(counts, threshold)
     x, y = pts[off, 0], pts[off, 1]
     skels: list[_Skel] = []
     taken = np.zeros(len(off), dtype=bool)
