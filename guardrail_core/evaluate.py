@@ -10,7 +10,7 @@ import numpy as np
 from guardrail_core.classes import GUARDRAIL_CLASSES
 from guardrail_core.drive import Drive
 from guardrail_core.errors import MissingDriveFileError, RunFolderError
-from guardrail_core.evaluate_reconstruction import evaluate_reconstruction
+from guardrail_core.evaluate_reconstruction import evaluate_reconstruction, units_in_view
 from guardrail_core.extract.crops import CROP_STATUS_NAMES
 from guardrail_core.reconstruction import RECONSTRUCTION_DIR, load_reconstruction
 from guardrail_core.run_folder import Run
@@ -121,7 +121,9 @@ def evaluate_run(drive: Drive, run: Run) -> dict[str, Any]:
     }
     if (run.root / RECONSTRUCTION_DIR / "models.json").is_file():
         runs, _ = load_reconstruction(run.root)
-        result["reconstruction"] = evaluate_reconstruction(runs, drive.truth.objects)
+        objects = drive.truth.objects
+        in_view = units_in_view(drive.points.xyz, drive.truth.point_object, objects)
+        result["reconstruction"] = evaluate_reconstruction(runs, objects, in_view=in_view)
     return result
 
 
@@ -163,18 +165,24 @@ def format_reconstruction(rec: dict[str, Any]) -> list[str]:
     """The reconstruction figures as a table: one row per design and one overall."""
     lines = [
         "Reconstruction (pipes of the unit shape; errors of found pipes; mm)",
-        f"  {'design':16s}{'pipes':>8s}{'radius':>8s}{'axis':>7s}{'beam':>7s}{'poles':>10s}"
-        f"{'pole pos':>10s}{'unit len':>10s}",
+        f"  {'design':16s}{'pipes':>8s}{'in view':>9s}{'radius':>8s}{'axis':>7s}{'beam':>7s}"
+        f"{'poles':>10s}{'pole pos':>10s}{'unit len':>10s}",
     ]
     rows = [*rec["designs"].items(), ("overall", rec["overall"])]
     for name, f in rows:
         pipes = f"{f['pipes_found']}/{f['pipes_total']}" if f["pipes_total"] else "-"
+        seen = str(f["pipes_in_view"]) if f["pipes_total"] else "-"
         lines.append(
-            f"  {name:16s}{pipes:>8s}{_mm(f['radius_err_mm_median']):>8s}"
+            f"  {name:16s}{pipes:>8s}{seen:>9s}{_mm(f['radius_err_mm_median']):>8s}"
             f"{_mm(f['axis_dev_mm_mean']):>7s}{_mm(f['beam_section_hausdorff_mm']):>7s}"
             f"{f['poles_found']:>5d}/{f['poles_total']:<4d}{_mm(f['pole_pos_err_mm_median']):>10s}"
             f"{_mm(f['unit_length_err_mm_median']):>10s}"
         )
+    overall = rec["overall"]
+    lines.append(
+        "  in view: pipes of the guardrails with a unit whose two poles were scanned "
+        f"({overall['guardrails_in_view']} of {overall['guardrails_total']} guardrails)"
+    )
     lines.append(
         "  radius: median error; axis: mean deviation; beam: section Hausdorff; pole pos and "
         "unit len: median errors"

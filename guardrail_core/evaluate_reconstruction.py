@@ -18,6 +18,11 @@ Matching rules
   axis deviation is the mean distance of the true axis to the reconstructed one (mm).
 - The beam section's error is the symmetric Hausdorff distance between the reconstructed and the
   true section curves (mm), in (across the post axis toward the road, up) coordinates.
+- Given the drive's points, a true guardrail is in view when at least one of its units has both
+  poles scanned (``pole_points`` of its own points within ``pole_reach_m`` of each axis): no
+  unit shape can be made of a guardrail the scanner never saw two poles of (one on a side
+  street, behind a wall). Its pipes still count in ``pipes_total``; ``pipes_in_view`` counts
+  those of the guardrails in view.
 """
 
 from __future__ import annotations
@@ -43,6 +48,8 @@ class ReconstructionMatch:
     pipe_coverage: float = 0.8  # ... along at least this share of the true pipe's length
     unit_share: float = 0.5  # a design pipe is found when found in this share of the units
     sample_step_m: float = 0.005  # curves are compared at samples this far apart
+    pole_reach_m: float = 0.1  # a pole is scanned when this close to its axis (horizontally)
+    pole_points: int = 10  # ... lie at least this many of its guardrail's points
 
 
 def densify(polyline: np.ndarray, step: float) -> np.ndarray:
@@ -105,6 +112,35 @@ def match_poles(
             taken.add(k)
             matched[(ri, pi)] = (*owner[k], dist)
     return matched, len(true_xy)
+
+
+def units_in_view(
+    xyz: np.ndarray,
+    point_object: np.ndarray,
+    objects: list[dict],
+    match: ReconstructionMatch = ReconstructionMatch(),
+) -> dict[int, int]:
+    """Per true guardrail id, how many of its units have both poles scanned.
+
+    Parameters
+    ----------
+    xyz : (N, 3) float64, metres: the drive's points, local frame
+    point_object : (N,) int: the truth object id of every point
+    objects : ``truth/objects.json``
+    """
+    out: dict[int, int] = {}
+    for t in truth_guardrails(objects):
+        own = xyz[np.asarray(point_object) == t["id"], :2]
+        poles = np.array([p["position"][:2] for p in t["poles"]], np.float64).reshape(-1, 2)
+        if len(own) == 0 or len(poles) == 0:
+            out[t["id"]] = 0
+            continue
+        counts = np.array(
+            [len(c) for c in cKDTree(own).query_ball_point(poles, match.pole_reach_m)]
+        )
+        seen = counts >= match.pole_points
+        out[t["id"]] = int(sum(seen[u["start_pole"]] and seen[u["end_pole"]] for u in t["units"]))
+    return out
 
 
 def _truth_frame(truth: dict, unit: int, frame: UnitFrame) -> UnitFrame:
@@ -203,15 +239,20 @@ def evaluate_reconstruction(
     runs: list[RunModel],
     objects: list[dict],
     match: ReconstructionMatch = ReconstructionMatch(),
+    in_view: dict[int, int] | None = None,
 ) -> dict[str, Any]:
     """Compare reconstructed runs with the truth guardrails of ``objects.json``.
+
+    ``in_view`` (from :func:`units_in_view`) gives each true guardrail's units with both poles
+    scanned; without it every guardrail counts as in view.
 
     Returns
     -------
     ``{"overall": figures, "designs": {design: figures}, "runs": [per true guardrail]}`` where
-    figures are ``pipes_found, pipes_total, radius_err_mm_median, axis_dev_mm_mean,
-    beam_section_hausdorff_mm, poles_found, poles_total, pole_pos_err_mm_median,
-    unit_length_err_mm_median`` (None where nothing was measured).
+    figures are ``pipes_found, pipes_total, pipes_in_view, guardrails_total,
+    guardrails_in_view, radius_err_mm_median, axis_dev_mm_mean, beam_section_hausdorff_mm,
+    poles_found, poles_total, pole_pos_err_mm_median, unit_length_err_mm_median`` (None where
+    nothing was measured).
     """
     truths = truth_guardrails(objects)
     matched, _ = match_poles(runs, truths, match)
@@ -228,6 +269,7 @@ def evaluate_reconstruction(
             "pipes": [],
             "pipes_total": len(t["pipes"]) // max(len(t["units"]), 1) if t["type"] == "pipe" else 0,
             "beam_section_hausdorff_mm": None,
+            "units_in_view": None if in_view is None else in_view.get(t["id"], 0),
         }
     for owner, _, dist in matched.values():
         per_truth[owner]["pole_errors_mm"].append(dist * 1000)
@@ -277,9 +319,13 @@ def _figures(records: list[dict]) -> dict[str, Any]:
     units = [e for r in records for e in r["unit_length_errors_mm"]]
     beams = [r["beam_section_hausdorff_mm"] for r in records if r["type"] == "beam"]
     beams_measured = [b for b in beams if b is not None]
+    seen = [r for r in records if r["units_in_view"] is None or r["units_in_view"] > 0]
     return {
         "pipes_found": len(found),
         "pipes_total": sum(r["pipes_total"] for r in records),
+        "pipes_in_view": sum(r["pipes_total"] for r in seen),
+        "guardrails_total": len(records),
+        "guardrails_in_view": len(seen),
         "radius_err_mm_median": _median(radius),
         "axis_dev_mm_mean": float(np.mean(axis)) if axis else None,
         "beam_section_hausdorff_mm": _median(beams_measured),

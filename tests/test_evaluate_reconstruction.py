@@ -9,6 +9,7 @@ from guardrail_core.evaluate_reconstruction import (
     densify,
     evaluate_reconstruction,
     hausdorff,
+    units_in_view,
 )
 from guardrail_core.reconstruct.model import Pipe, Pole, RunModel, UnitModel
 from guardrail_core.reconstruct.model_json import run_model_from_json, run_model_to_json
@@ -158,3 +159,31 @@ def test_model_json_round_trip():
     assert abs(back.units[2].length - run.units[2].length) <= 5e-5
     again = evaluate_reconstruction([back], [record])["overall"]
     assert again["pipes_found"] == len(design.pipes)
+
+
+def test_a_guardrail_counts_in_view_from_one_unit_with_both_poles_scanned():
+    design, seen = _truth("pipe_simple_3", object_id=1)
+    _, hidden = _truth("pipe_diamond", object_id=2)
+    hidden = {
+        **hidden,
+        "poles": [{**p, "position": [p["position"][0], 30.0, 0.0]} for p in hidden["poles"]],
+    }
+    rng = np.random.default_rng(0)
+    own = [np.array(p["position"]) + rng.normal(0, 0.03, (12, 3)) for p in seen["poles"]]
+    xyz = np.vstack([*own, np.array(hidden["poles"][0]["position"]) + np.zeros((40, 3))])
+    object_id = np.repeat([1, 2], [12 * len(seen["poles"]), 40])
+    # The first guardrail: 12 points at every pole, but pole 1's lie 0.3 m off (not scanned),
+    # so units 0-1 and 1-2 are out of view; the second: one pole scanned, so no unit.
+    xyz[12 : 2 * 12] += [0.0, 0.3, 0.0]
+    in_view = units_in_view(xyz, object_id, [seen, hidden])
+    assert in_view == {1: len(seen["units"]) - 2, 2: 0}
+    result = evaluate_reconstruction([], [seen, hidden], in_view=in_view)
+    overall = result["overall"]
+    assert overall["pipes_total"] == len(design.pipes) + 6  # the diamond's 6 pipes
+    assert overall["pipes_in_view"] == len(design.pipes)
+    assert (overall["guardrails_total"], overall["guardrails_in_view"]) == (2, 1)
+    # Without the points, every guardrail counts as in view.
+    assert (
+        evaluate_reconstruction([], [seen, hidden])["overall"]["pipes_in_view"]
+        == len(design.pipes) + 6
+    )

@@ -169,3 +169,32 @@ def test_ground_points_on_a_poles_foot_are_not_its_ground():
     det = detect_poles(run.xyz, np.vstack([run.ground, foot]))
     _, z_err = _match(det, run.poles)
     assert z_err.max() < 0.01
+
+
+def _feet_as_road(run, height):
+    """The run's points and ground with every pole's lowest ``height`` metres moved from the
+    guardrail points to the road points (a road mask seen from across the street)."""
+    near = np.linalg.norm(run.xyz[:, None, :2] - run.poles[None, :, :2], axis=2).argmin(axis=1)
+    foot = run.is_pole & (run.xyz[:, 2] - run.poles[near, 2] < height)
+    return run.xyz[~foot], np.vstack([run.ground, run.xyz[foot]])
+
+
+def test_a_pole_whose_foot_was_taken_for_road_still_stands_on_the_ground():
+    # Seen from across the street, the lowest 0.15 m of a pole is taken for road; the
+    # balusters stop at the lowest rail, 0.15 m up, over bare ground.
+    run = make_run(3, rails=(0.15, 0.86), balusters=True, seed=14)
+    xyz, ground = _feet_as_road(run, 0.16)
+    det = detect_poles(xyz, ground)
+    xy_err, z_err = _match(det, run.poles)
+    # The axis comes from the pole above the lowest rail (2 mm on whole poles, 11 mm here).
+    assert xy_err.max() < 0.015 and z_err.max() < 0.01
+    whole = detect_poles(run.xyz, run.ground).poles  # heights as if the foot had been kept
+    np.testing.assert_allclose([p.height for p in det.poles], [p.height for p in whole], atol=0.01)
+    # Without the road points there is nothing under the cut poles: they stand 0.16 m up,
+    # like the balusters, and are not poles.
+    assert detect_poles(xyz, run.ground).poles == []
+    # With no road points but the poles' feet, the feet are the poles' ground points, and
+    # the base the balusters are tested against.
+    det = detect_poles(xyz, ground[len(run.ground) :])
+    _, z_err = _match(det, run.poles)
+    assert z_err.max() < 0.02

@@ -162,6 +162,28 @@ def test_uneven_ground_under_the_poles_follows_the_rail():
     assert kept.notes == ()
 
 
+def test_a_rail_unseen_near_one_pole_leaves_the_measured_ground():
+    # Across the street the top rail went unseen for the first metre: there the rail's top
+    # reads 0.36 m low. The grounds measured at the poles lie on one line, the rail tops do
+    # not, so the rail is what is uneven and no pole is moved.
+    run = make_run(4, seed=23)
+    rails = run.xyz[~run.is_pole]
+    near_first = np.linalg.norm(rails[:, :2] - run.poles[0, :2], axis=1) < 1.0
+    top_rail = rails[:, 2] - np.interp(rails[:, 0], run.poles[:, 0], run.poles[:, 2]) > 0.6
+    rails = rails[~(near_first & top_rail)]
+    split = split_units(rails, _poles(run))
+    np.testing.assert_array_equal([p.position for p in split.poles], run.poles)
+    assert "uneven ground" not in " ".join(split.notes)
+    # With the same rails, grounds off their line (a verge under two poles) follow the rail.
+    bumps = [0.0, 0.06, -0.05, 0.0, 0.0]
+    uneven = [
+        Pole(p.position + [0.0, 0.0, b], p.radius, p.height - b, p.n_points)
+        for p, b in zip(_poles(run), bumps, strict=True)
+    ]
+    got = np.array([p.position for p in split_units(rails, uneven).poles])
+    assert np.abs(got[1:3] - run.poles[1:3]).max() < 0.01
+
+
 def test_clutter_across_the_run_beyond_its_end_places_no_pole():
     # A bush 1.0-1.3 m beyond the last pole, 2 m across the run: its points run across, not on.
     run = make_run(3, grade=0.0, seed=23)

@@ -90,6 +90,11 @@ class PipeParams:
         A vertical pipe's points must cover at least this height without a gap.
     vertical_gap : float, m
         The largest gap in y within the points of one vertical pipe.
+    vertical_sparse_gap : float, m
+        The largest gap where ``vertical_gap`` finds no vertical pipe: a thin pipe gets one
+        streak of points per scan line, and when every unit of a run was scanned at the same
+        heights (the pole spacing a multiple of the vehicle's advance per scanner turn, 0.1 m
+        at 10 m/s) the superimposition does not fill the gaps between the streaks.
     vertical_angle : float, deg
         A histogram peak whose points lean more than this from the vertical is no vertical pipe
         (the steep foot of an arch); a straight skeleton within it of the vertical is vertical.
@@ -162,9 +167,11 @@ class PipeParams:
     line_chunk : float, m
         Length of the pieces a run is cut into to check it is populated and straight.
     line_straightness : float, m
-        A piece's median offset may differ from the run's by this much (on more than a fifth of
-        the pieces, the run is curved). A rail superimposed from 8-12 units can bow by
-        6 mm; an arch's crown deviates by 1-3 cm.
+        A piece's median offset may differ from the run's by this much, or by three standard
+        errors of that median where more (a sparse pipe's few points scatter); on more than a
+        fifth of the pieces it does not, and the run is curved. A rail superimposed from 8-12
+        units bows by up to 6 mm (3 mm either side of its median); an arch's crown deviates by
+        1-3 cm, the stretch of a wave (amplitude 0.15 m) between its crests by 4-8 mm.
     line_occupancy : float in (0, 1]
         Share of pieces holding two points or more.
     line_hypotheses : int
@@ -178,6 +185,7 @@ class PipeParams:
     radius_share: float = 0.94
     vertical_min_length: float = 0.1
     vertical_gap: float = 0.06
+    vertical_sparse_gap: float = 0.12
     vertical_angle: float = 4.0
     slice_interval: float = 0.03
     max_edge: float = 0.03
@@ -207,7 +215,7 @@ class PipeParams:
     line_band: float = 0.03
     line_min_length: float = 0.3
     line_chunk: float = 0.1
-    line_straightness: float = 0.008
+    line_straightness: float = 0.005
     line_occupancy: float = 0.7
     line_hypotheses: int = 300
 
@@ -217,6 +225,7 @@ class PipeParams:
             "histogram_factor",
             "vertical_min_length",
             "vertical_gap",
+            "vertical_sparse_gap",
             "slice_interval",
             "max_edge",
             "link_distance",
@@ -479,33 +488,40 @@ def _vertical_pipes(
     x, y = pts[:, 0], pts[:, 1]
     for a, b in zip(starts, stops, strict=True):
         lo, hi = edges[a], edges[b]
-        centre, half = 0.5 * (lo + hi), 0.5 * (hi - lo) + p.histogram_bin
         found = None
-        for _ in range(2):  # the window follows the estimated pipe width
-            found = None
-            sel = (np.abs(x - centre) <= half) & ~removed  # a pipe split in two regions
-            if sel.sum() < p.min_points:
+        # A thin pipe is hit once per scan line: where every unit of a run was scanned at the
+        # same heights its points stand in streaks vertical_sparse_gap apart. That wider gap is
+        # tried only where the usual one finds nothing, so it cannot join a dense vertical to
+        # the pipes below it.
+        for gap in (p.vertical_gap, p.vertical_sparse_gap):
+            centre, half = 0.5 * (lo + hi), 0.5 * (hi - lo) + p.histogram_bin
+            for _ in range(2):  # the window follows the estimated pipe width
+                found = None
+                sel = (np.abs(x - centre) <= half) & ~removed  # a pipe split in two regions
+                if sel.sum() < p.min_points:
+                    break
+                y0, y1 = _longest_chain(y[sel], gap)
+                if y1 - y0 < p.vertical_min_length:
+                    break
+                inner = sel & (y > y0 + gap) & (y < y1 - gap)
+                inner &= ~_horizontal_bands(y, inner, p)
+                if inner.sum() < p.min_points:
+                    break
+                # A vertical pipe stands straight: x does not drift with y.
+                slope = np.polyfit(y[inner], x[inner], 1)[0]
+                if abs(slope) > tan_tol:
+                    break
+                qlo, qhi = _central_quantiles(x[inner], p.radius_share)
+                centre = 0.5 * (qlo + qhi)
+                radius = 0.5 * (qhi - qlo) / p.radius_share
+                half = radius + p.assign_margin
+                found = (sel, centre, radius, gap)
+            if found is not None:
                 break
-            y0, y1 = _longest_chain(y[sel], p.vertical_gap)
-            if y1 - y0 < p.vertical_min_length:
-                break
-            inner = sel & (y > y0 + p.vertical_gap) & (y < y1 - p.vertical_gap)
-            inner &= ~_horizontal_bands(y, inner, p)
-            if inner.sum() < p.min_points:
-                break
-            # A vertical pipe stands straight: x does not drift with y.
-            slope = np.polyfit(y[inner], x[inner], 1)[0]
-            if abs(slope) > tan_tol:
-                break
-            qlo, qhi = _central_quantiles(x[inner], p.radius_share)
-            centre = 0.5 * (qlo + qhi)
-            radius = 0.5 * (qhi - qlo) / p.radius_share
-            half = radius + p.assign_margin
-            found = (sel, centre, radius)
         if found is None:
             continue
-        sel, centre, radius = found
-        y0, y1 = _longest_chain(y[sel], p.vertical_gap)
+        sel, centre, radius, _ = found
+        y0, y1 = _longest_chain(y[sel], p.vertical_sparse_gap)
         # A short one ends on pipes running across; the steep foot of an arch goes on aside.
         if y1 - y0 < 2 * p.vertical_min_length and not all(
             _crossed(pts, centre, end, radius, p) for end in (y0, y1)
@@ -615,9 +631,11 @@ def _horizontal_bands(y: np.ndarray, sel: np.ndarray, p: PipeParams) -> np.ndarr
 
 
 def _line_run(
-    t: np.ndarray, off: np.ndarray, p: PipeParams
+    t: np.ndarray, off: np.ndarray, p: PipeParams, *, straight: bool = True
 ) -> tuple[float, float, np.ndarray] | None:
-    """The longest gap-free run of projections ``t`` and whether it is a straight pipe."""
+    """The longest gap-free run of projections ``t`` (N,) and whether it is a straight pipe
+    (with ``straight``: its pieces' offsets ``off`` (N,) agree; else only its length and
+    occupancy are checked)."""
     if len(t) < p.min_points:
         return None
     order = np.argsort(t)
@@ -635,10 +653,18 @@ def _line_run(
     cnt = np.bincount(chunk, minlength=n_chunks)
     if np.mean(cnt >= 2) < p.line_occupancy:
         return None
+    if not straight:
+        return t0, t1, sel
     o = off[sel]
     med = float(np.median(o))
     full = np.flatnonzero(cnt >= 4)
-    bad = sum(abs(float(np.median(o[chunk == c])) - med) > p.line_straightness for c in full)
+    # A piece's median is off when it is off by more than line_straightness and by more than
+    # three of its standard errors (1.25 sd / sqrt n): a sparse rail's few points scatter.
+    bad = 0
+    for c in full:
+        oc = o[chunk == c]
+        se = 1.25 * float(np.std(oc)) / math.sqrt(len(oc))
+        bad += abs(float(np.median(oc)) - med) > max(p.line_straightness, 3.0 * se)
     if bad > 0.2 * len(full):
         return None
     return t0, t1, sel
@@ -653,7 +679,8 @@ def _straight_pipes(
     best is refitted, cut to its longest gap-free run and kept when that run is at least
     ``line_min_length`` long, populated along ``line_occupancy`` of its length and straight
     (the median offset of every ``line_chunk`` piece within ``line_straightness`` of the
-    whole's: a curved pipe fails this). The kept line's points are removed from the search.
+    whole's, see :func:`_line_run`: a curved pipe fails this). The kept line's points are
+    removed from the search.
     """
     removed = np.zeros(len(rest_idx), dtype=bool)
     hidden = np.zeros(len(rest_idx), dtype=bool)
@@ -781,7 +808,10 @@ def _run_on(line: _Skel, point: np.ndarray) -> None:
 def _refine_line(
     xy: np.ndarray, live: np.ndarray, c: np.ndarray, u: np.ndarray, p: PipeParams
 ) -> tuple[np.ndarray, np.ndarray, float, float, float] | None:
-    """Refit a line hypothesis to its band's points; its run, or None when no straight pipe."""
+    """Refit a line hypothesis to its band's points; its run, or None when no straight pipe.
+
+    Straightness is judged on the refitted line only: a hypothesis through two points a few
+    centimetres apart leans by several degrees, and its band's offsets drift along it."""
     for _ in range(3):
         nrm = np.array([-u[1], u[0]])
         rel = xy[live] - c
@@ -789,7 +819,7 @@ def _refine_line(
         inb = np.abs(o) <= p.line_band
         if inb.sum() < p.min_points:
             return None
-        run = _line_run(rel[inb] @ u, o[inb], p)
+        run = _line_run(rel[inb] @ u, o[inb], p, straight=False)
         if run is None:
             return None
         q = xy[live][inb][run[2]]

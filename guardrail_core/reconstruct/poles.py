@@ -81,6 +81,11 @@ class PoleParams:
     max_base_height_m: float = 0.1
     """Metres. The lowest stack point must be at most this far above the ground: poles reach
     the ground, balusters and stays stop at the lowest rail, 0.15-0.25 m above it."""
+    foot_gap_m: float = 0.06
+    """Metres. Road points on a stack's footprint continue it downward while each lies at most
+    this far below the one above: seen from across the road, a pole's lowest 0.15 m is taken
+    for road (its normals tilt up), yet it still reaches the ground; a baluster's end hangs
+    0.15 m or more above the ground points under it."""
     min_radius_m: float = 0.02
     """Metres. Smallest accepted pole radius (data: 30.5 mm; balusters are 11-14 mm)."""
     max_radius_m: float = 0.09
@@ -382,6 +387,8 @@ def detect_poles(
     z_min = np.full(n_stack, np.inf)
     np.minimum.at(z_min, stack[in_stack], xyz[in_stack, 2])
     ground_z, _ = _ground_height(stack_centre, z_min, ground, xyz, params)
+    reach = np.full(n_stack, params.max_radius_m + params.member_margin_m)
+    z_min = _foot_bottom(stack_centre, reach, z_min, ground, params.foot_gap_m)
     n_pts = np.bincount(stack[in_stack], minlength=n_stack)
     maybe = (z_min - ground_z <= params.max_base_height_m) & (n_pts >= params.min_points)
 
@@ -513,11 +520,12 @@ def _measure(
     np.minimum.at(low, member_pole[has], xyz[has, 2])
     top, low = np.maximum(top, z_hi), np.minimum(low, z_lo)
     # §4.1: the height of the pole is determined using the ground and the highest point.
-    base_ref, ground_z = _ground_height(centre, low, ground, xyz, params)
+    foot = _foot_bottom(centre, radius + params.member_margin_m, z_lo, ground, params.foot_gap_m)
+    base_ref, ground_z = _ground_height(centre, np.minimum(low, foot), ground, xyz, params)
     height = top - ground_z
     extent_share = (z_hi - z_lo) / np.maximum(height, 1e-9)
     accept = (
-        (z_lo - base_ref <= params.max_base_height_m)  # a pole stands on the ground
+        (foot - base_ref <= params.max_base_height_m)  # a pole stands on the ground
         & (height >= params.min_height_m)
         & (height <= params.max_height_m)
         & (extent_share >= params.min_extent_share)
@@ -529,6 +537,35 @@ def _measure(
         centre=centre, radius=radius, ground_z=ground_z, height=height, accept=accept,
         member_pole=member_pole,
     )  # fmt: skip
+
+
+def _foot_bottom(
+    centre: np.ndarray, reach: np.ndarray, bottom: np.ndarray, ground: np.ndarray, gap: float
+) -> np.ndarray:
+    """Bottoms (P,) of axes, metres, lowered along road points on their footprints.
+
+    Parameters
+    ----------
+    centre : (P, 2) axes; reach : (P,) footprint radii; bottom : (P,) lowest pole points
+    ground : (G, 3) road points; gap : the largest step (m) from one foot point to the next
+
+    Starting at ``bottom``, the road points within ``reach`` of the axis, from the highest
+    down, continue the pole while each lies at most ``gap`` below the previous one.
+    """
+    out = np.asarray(bottom, np.float64).copy()
+    if len(ground) == 0 or len(centre) == 0:
+        return out
+    tree = cKDTree(ground[:, :2])
+    for k, near in enumerate(tree.query_ball_point(centre, reach)):  # per axis (a few)
+        if not np.isfinite(out[k]) or not near:
+            continue
+        z = np.sort(ground[near, 2])[::-1]
+        z = z[z < out[k]]
+        steps = -np.diff(np.concatenate([[out[k]], z]))
+        reached = np.flatnonzero(np.cumsum(steps > gap) == 0)
+        if len(reached):
+            out[k] = z[reached[-1]]
+    return out
 
 
 def _group_stacks(
@@ -637,20 +674,21 @@ def _ground_height(
 
     From the ``ground_k`` nearest ground points within ``ground_radius_m`` outside the widest
     pole's footprint (median z): both the same. Without ground points there: the base is
-    tested against the lowest run point within ``no_ground_window_m`` (the neighbouring pole's
-    base for a baluster), and the position takes the pole's own lowest point ``low`` (P,) (a
-    pole reaches the ground).
+    tested against the lowest run or road point within ``no_ground_window_m`` (the
+    neighbouring pole's base for a baluster), and the position takes the pole's own lowest
+    point ``low`` (P,) (a pole reaches the ground).
     """
     out = np.full(len(centre), np.nan)
     if len(ground):
-        # Ground points on the pole's own footprint are the pole's foot (a sparse scanner's
-        # road mask takes some in), not the ground around it.
+        # Ground points on a footprint are a pole's foot (a sparse scanner's road mask takes
+        # some in), not the ground around it: not for this pole, nor for a baluster beside it.
         foot = params.max_radius_m + params.member_margin_m
+        on_foot = cKDTree(centre).query(ground[:, :2], distance_upper_bound=foot)[0] <= foot
         tree = cKDTree(ground[:, :2])
         k = min(4 * params.ground_k, len(ground))
         d, i = tree.query(centre, k=k, distance_upper_bound=params.ground_radius_m)
         d, i = d.reshape(len(centre), k), i.reshape(len(centre), k)
-        valid = np.isfinite(d) & (d > foot)
+        valid = np.isfinite(d) & ~on_foot[np.minimum(i, len(ground) - 1)]
         valid &= np.cumsum(valid, axis=1) <= params.ground_k
         z = np.where(valid, ground[np.minimum(i, len(ground) - 1), 2], np.nan)
         enough = (valid.sum(axis=1) == params.ground_k) | ~np.isfinite(d[:, -1])
@@ -659,16 +697,18 @@ def _ground_height(
         # Dense ground can fill the nearest k with footprint points: search the whole radius.
         for a in np.flatnonzero(~enough):  # rare
             near = np.asarray(tree.query_ball_point(centre[a], params.ground_radius_m), np.int64)
+            near = near[~on_foot[near]]
             dist = np.linalg.norm(ground[near, :2] - centre[a], axis=1)
-            near, dist = near[dist > foot], dist[dist > foot]
             if len(near):
                 nearest = near[np.argsort(dist, kind="stable")[: params.ground_k]]
                 out[a] = float(np.median(ground[nearest, 2]))
     position = np.where(np.isfinite(out), out, low)
     missing = np.flatnonzero(~np.isfinite(out))
     if len(missing):
-        # The lowest run point within the window: points by height, the first within reach
-        # of each axis (chunks of the lowest points first; usually one chunk does).
+        # The lowest run or road point within the window (road points there stand on a pole's
+        # foot): points by height, the first within reach of each axis (chunks of the lowest
+        # points first; usually one chunk does).
+        xyz = np.vstack([xyz, ground]) if len(ground) else xyz
         order = np.argsort(xyz[:, 2], kind="stable")
         lowest = np.full(len(missing), np.inf)
         todo = np.arange(len(missing))

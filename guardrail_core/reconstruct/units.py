@@ -61,7 +61,9 @@ class UnitParams:
     of a pole) stands at one height above every pole's ground. Where these heights spread
     (max - min) wider than this, the ground under the poles is uneven (a verge, a kerb; on a
     real motorway scan they spread 0.71-0.79 m) and each pole's ground is set to the rail top
-    near it less the median height, so the units follow the rail. 0 turns this off."""
+    near it less the median height, so the units follow the rail. A rail top off the
+    (Theil-Sen) line of the others by more than this is a rail unseen near that pole: that
+    pole keeps its measured ground. 0 turns this off."""
     rail_top_radius_m: float = 1.0
     """Metres. Rail points within this horizontal distance of a pole give the rail top there."""
     min_extension_points: int = 10
@@ -194,7 +196,15 @@ def _level_to_rail(
     known = np.isfinite(top)
     if known.sum() < 2:
         return list(poles), []
+    # A rail top off the line of the others is a rail unseen near that pole, not its ground.
+    station = np.concatenate([[0.0], np.cumsum(chord)])
+    slope, intercept = _theil_sen(station[known], top[known])
+    off_line = np.abs(top - (intercept + slope * station))
+    top[known & (off_line > params.rail_level_tolerance_m)] = np.nan
+    known = np.isfinite(top)
     above = top - pos[:, 2]
+    if known.sum() < 2:
+        return list(poles), []
     low, high = np.nanmin(above), np.nanmax(above)
     if high - low <= params.rail_level_tolerance_m:
         return list(poles), []
@@ -213,6 +223,16 @@ def _level_to_rail(
         f"(uneven ground): the poles' ground follows the rail, {level:.2f} m below its top"
     )
     return out, [note]
+
+
+def _theil_sen(x: np.ndarray, z: np.ndarray) -> tuple[float, float]:
+    """(slope, intercept) of the Theil-Sen line of heights ``z`` (K,) over stations ``x`` (K,):
+    the median slope of all pairs, through the median intercept (from four heights on, one
+    wrong height does not tilt it)."""
+    i, j = np.triu_indices(len(x), 1)
+    ok = np.abs(x[j] - x[i]) > 1e-9
+    slope = float(np.median((z[j] - z[i])[ok] / (x[j] - x[i])[ok])) if ok.any() else 0.0
+    return slope, float(np.median(z - slope * x))
 
 
 def _extend_ends(
