@@ -657,15 +657,21 @@ def _line_run(
         return t0, t1, sel
     o = off[sel]
     med = float(np.median(o))
-    full = np.flatnonzero(cnt >= 4)
+    full = cnt >= 4
     # A piece's median is off when it is off by more than line_straightness and by more than
     # three of its standard errors (1.25 sd / sqrt n): a sparse rail's few points scatter.
-    bad = 0
-    for c in full:
-        oc = o[chunk == c]
-        se = 1.25 * float(np.std(oc)) / math.sqrt(len(oc))
-        bad += abs(float(np.median(oc)) - med) > max(p.line_straightness, 3.0 * se)
-    if bad > 0.2 * len(full):
+    by_piece = np.lexsort((o, chunk))
+    first = np.concatenate([[0], np.cumsum(cnt)[:-1]])
+    sorted_o = o[by_piece]
+    last = len(o) - 1  # empty pieces index anywhere; only full pieces are read
+    lower = np.clip(first + (cnt - 1) // 2, 0, last)
+    upper = np.clip(first + cnt // 2, 0, last)
+    piece_median = 0.5 * (sorted_o[lower] + sorted_o[upper])
+    mean = np.bincount(chunk, o, n_chunks) / np.maximum(cnt, 1)
+    var = np.bincount(chunk, o * o, n_chunks) / np.maximum(cnt, 1) - mean**2
+    se = 1.25 * np.sqrt(np.maximum(var, 0.0) / np.maximum(cnt, 1))
+    off_line = np.abs(piece_median - med) > np.maximum(p.line_straightness, 3.0 * se)
+    if (off_line & full).sum() > 0.2 * full.sum():
         return None
     return t0, t1, sel
 
