@@ -251,11 +251,9 @@ def reconstruct_run(
         chosen = chosen[:max_units]
     used = [unit_points[u] for u in chosen]
     length = float(np.median([f.length for f in frames]))
-    register = params.register
     stacked = np.concatenate(used)
-    if len(used) > 1 and len(stacked) and unit_type(stacked, length, params.beams) == "beam":
-        register = dataclasses.replace(register, max_translation_m=register.beam_max_translation_m)
-    superimposed = superimpose(used, register)
+    beam = len(used) > 1 and len(stacked) > 0 and unit_type(stacked, length, params.beams) == "beam"
+    superimposed = superimpose(used, params.register, beam=beam)
     superimposed = dataclasses.replace(
         superimposed, unit_of_point=chosen[superimposed.unit_of_point].astype(np.int32)
     )

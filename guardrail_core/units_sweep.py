@@ -54,7 +54,9 @@ def units_sweep(
     -------
     ``{"units": [k ...], "designs": {design: {"type", "found": [...], "total": [...],
     "complete_from": smallest k with every pipe found (None if never)}}}``. For beam designs
-    ``found``/``total`` count beam runs whose section is within :data:`BEAM_TOLERANCE_MM`.
+    ``found``/``total`` count beam runs whose section is within :data:`BEAM_TOLERANCE_MM`, and
+    ``worst_section_hausdorff_mm`` holds the largest section Hausdorff (mm) of the design's runs
+    for every k (None where no section was measured).
     """
     if drive.truth is None:
         raise InvalidOptionError(f"{drive.root}: the units sweep needs a drive with truth/")
@@ -79,12 +81,15 @@ def units_sweep(
             kind = records[0]["type"]
             entry = designs.setdefault(design, {"type": kind, "found": [], "total": []})
             if kind == "beam":
-                found = sum(
-                    r["beam_section_hausdorff_mm"] is not None
-                    and r["beam_section_hausdorff_mm"] <= BEAM_TOLERANCE_MM
+                measured = [
+                    r["beam_section_hausdorff_mm"]
                     for r in records
-                )
+                    if r["beam_section_hausdorff_mm"] is not None
+                ]
+                found = sum(h <= BEAM_TOLERANCE_MM for h in measured)
                 total = len(records)
+                worst = entry.setdefault("worst_section_hausdorff_mm", [])
+                worst.append(round(max(measured), 2) if measured else None)
             else:
                 found = sum(r["pipes_found"] for r in records)
                 total = sum(r["pipes_total"] for r in records)
@@ -110,6 +115,16 @@ def format_units_sweep(result: dict[str, Any]) -> str:
         )
         done = entry["complete_from"]
         lines.append(f"{design:<{width}}  {cells}  {done if done is not None else 'never'}")
+        if "worst_section_hausdorff_mm" in entry:
+            mm = "  ".join(
+                "     -" if h is None else f"{h:>6.1f}" for h in entry["worst_section_hausdorff_mm"]
+            )
+            lines.append(f"{'  section, mm':<{width}}  {mm}")
+    if any("worst_section_hausdorff_mm" in e for e in result["designs"].values()):
+        lines.append(
+            f"beams: found when the section is within {BEAM_TOLERANCE_MM:g} mm (Hausdorff);"
+        )
+        lines.append("section, mm: the largest Hausdorff of the design's runs")
     return "\n".join(lines)
 
 

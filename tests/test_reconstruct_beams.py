@@ -5,7 +5,7 @@ import pytest
 
 from guardrail_core.errors import ReconstructionError
 from guardrail_core.reconstruct.beams import BeamParams, reconstruct_beam, unit_type
-from guardrail_core.synth.designs import w_beam_section
+from guardrail_core.synth.designs import thrie_beam_section, w_beam_section
 
 LENGTH = 4.0
 POST_R = 0.0699
@@ -160,3 +160,31 @@ def test_a_shadowed_bottom_flank_is_mirrored_down_to_the_plates_edge():
     rec = reconstruct_beam(pts[pts[:, 1] > crest - 0.015], LENGTH, POST_R)
     assert abs(rec.section[0, 1] - truth[0, 1]) < 0.004  # down to the edge, not short of it
     assert _hausdorff(rec.section, truth) < 0.008
+
+
+def _thrie_seen_from_above(seed, n=4000, noise=0.003):
+    """A thrie beam's points as a scanner above the road sees them: the upward-facing flanks
+    and the crests' tops only (z within 10 mm of the crest), with noise. (N, 3), truth (M, 2)."""
+    rng = np.random.default_rng(seed)
+    s = thrie_beam_section()
+    truth = np.column_stack([0.1 + s[:, 0], 0.55 + s[:, 1]])
+    cum = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(truth, axis=0), axis=1))])
+    u = rng.uniform(0, cum[-1], n)
+    z, y = np.interp(u, cum, truth[:, 0]), np.interp(u, cum, truth[:, 1])
+    rising = np.interp(u + 1e-4, cum, truth[:, 0]) > np.interp(u - 1e-4, cum, truth[:, 0])
+    seen = ~rising | (z > truth[:, 0].max() - 0.01)
+    pts = np.column_stack([rng.uniform(0, LENGTH, n), y, z + 0.00115])[seen]
+    return pts + rng.normal(0, noise, pts.shape), truth
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_a_thrie_beam_seen_from_above_is_mirrored_about_fitted_crests(seed):
+    # Every ridge's lower flank and the plate below the lowest crest are unseen. The mirror
+    # axis is the crest's fitted height (the highest slice centre is off by several mm on the
+    # flat ridge top, and the mirrored flank by twice that), and the plate's bottom edge lies
+    # half a crest spacing below the lowest crest, at the valleys' depth.
+    pts, truth = _thrie_seen_from_above(seed)
+    rec = reconstruct_beam(pts, LENGTH, POST_R)
+    assert "shadowed flanks" in rec.notes[0]
+    assert abs(rec.section[0, 1] - truth[0, 1]) < 0.004
+    assert _hausdorff(rec.section, truth) < 0.007

@@ -94,3 +94,45 @@ def test_one_unit_empty_units_and_tiny_units():
 def test_bad_input_raises(units, kwargs, match):
     with pytest.raises(ReconstructionError, match=match):
         superimpose(units, **kwargs)
+
+
+def _beam_units(n_units=4, seed=0, n=3000):
+    """Thrie-beam units as seen from above the road: upward-facing flanks and crest tops, with
+    range noise along a downward ray. (n_units,) list of (N, 3) unit coordinates."""
+    from guardrail_core.synth.designs import thrie_beam_section
+
+    rng = np.random.default_rng(seed)
+    s = thrie_beam_section()
+    section = np.column_stack([0.1 + s[:, 0], 0.55 + s[:, 1]])  # (z, y)
+    cum = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(section, axis=0), axis=1))])
+    units = []
+    for _ in range(n_units):
+        u = rng.uniform(0, cum[-1], n)
+        z, y = np.interp(u, cum, section[:, 0]), np.interp(u, cum, section[:, 1])
+        rising = np.interp(u + 1e-4, cum, section[:, 0]) > np.interp(u - 1e-4, cum, section[:, 0])
+        seen = ~rising | (z > section[:, 0].max() - 0.01)
+        pts = np.column_stack([rng.uniform(0.15, 1.85, n), y, z])[seen]
+        units.append(pts + rng.normal(0, 0.005, (len(pts), 1)) * [0.0, -0.7, -0.7])
+    return units
+
+
+def test_a_beam_unit_keeps_its_x_and_is_corrected_across_only():
+    units = _beam_units()
+    units[2] = units[2] + [0.025, 0.003, -0.002]  # 25 mm along the beam, 3.6 mm across
+    sup = superimpose(units, beam=True)
+    assert sup.registered.all()
+    # the slide along the beam is not undone (the section is the same all along), nor is any
+    # other unit slid along it; across, the offset is
+    assert np.all(sup.transforms[:, 0, 3] == 0.0)
+    np.testing.assert_allclose(sup.transforms[2][1:3, 3], [-0.003, 0.002], atol=0.0015)
+
+
+def test_a_beam_unit_further_off_across_than_the_bound_keeps_its_rough_alignment():
+    units = _beam_units(seed=1)
+    units[1] = units[1] + [0.0, 0.012, 0.0]
+    sup = superimpose(units, beam=True)
+    assert not sup.registered[1]
+    np.testing.assert_allclose(sup.transforms[1], np.eye(4))
+    wide = superimpose(units, RegisterParams(beam_max_translation_m=0.03), beam=True)
+    assert wide.registered[1]
+    assert abs(wide.transforms[1][1, 3] + 0.012) < 0.003

@@ -19,7 +19,8 @@ from guardrail_core.errors import ReconstructionError
 from guardrail_core.reconstruct.pipes import check_unit_points
 from guardrail_core.reconstruct.smoothing import check_taubin_params, taubin_smooth
 
-#: Metres. Past a crest, the flank's valley is where z has risen this much above its lowest.
+#: Metres. Past a crest, the flank's valley is where z has risen this much above its lowest;
+#: climbing to a crest, a fall of this much below the highest z so far ends the climb.
 VALLEY_RISE_M = 0.005
 
 __all__ = ["BeamParams", "BeamReconstruction", "reconstruct_beam", "unit_type"]
@@ -81,6 +82,9 @@ class BeamParams:
         beam and cannot see it) with the mirror image of the ridge's upper flank about its
         crest; also below the lowest vertex when the section stops near a crest. Assumes the
         symmetric ridges of standard W and thrie beams; False bridges gaps straight.
+    crest_depth : float, m
+        The height of a crest, the mirror's axis, is fitted to the slice centres of its ridge
+        within this depth (z) of the highest: the ridge's rounded top.
     taubin_lambda, taubin_mu : float
         Taubin's filter factors.
     taubin_iterations : int
@@ -104,6 +108,7 @@ class BeamParams:
     min_x_spread: float = 0.2
     max_band_gap: float = 0.1
     fill_shadowed: bool = True
+    crest_depth: float = 0.015
     taubin_lambda: float = 0.5
     taubin_mu: float = -0.53
     taubin_iterations: int = 5
@@ -113,7 +118,7 @@ class BeamParams:
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise ReconstructionError(f"BeamParams.{name} must be > 0, got {v}")
-        lengths = ("max_gap", "type_margin", "pole_margin", "post_gap", "shadow_gap")
+        lengths = ("max_gap", "type_margin", "pole_margin", "post_gap", "shadow_gap", "crest_depth")
         for name in (*lengths, "max_band_gap"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0):
@@ -365,37 +370,103 @@ def _fill_shadowed(section: np.ndarray, p: BeamParams) -> np.ndarray:
     section : (M, 2) (z, y) from bottom to top. A gap (a step in y above ``shadow_gap``) whose
     upper side climbs to a crest (a local maximum of z) is filled with the crest's upper flank
     mirrored about the crest height; so is the stretch below the lowest vertex when that vertex
-    lies in the upper half of the section's depth (the plate cannot end at a ridge).
+    lies in the upper half of the section's depth (the plate cannot end at a ridge). Crest
+    heights come from :func:`_crest_height`, not from the highest vertex: a mirror axis off by
+    d moves the filled flank by 2 d.
     """
     z, y = section[:, 0], section[:, 1]
     z_mid = 0.5 * (z.min() + z.max())
     pieces = [section]
 
-    def crest_above(i: int) -> int:
-        j = i
-        while j + 1 < len(z) and z[j + 1] >= z[j]:
-            j += 1
-        return j
-
-    def mirrored(c: int, lo: float, hi: float) -> np.ndarray:
-        up = section[c:]
-        m = np.column_stack([up[:, 0], 2.0 * y[c] - up[:, 1]])
+    def mirrored(axis: float, lo: float, hi: float) -> np.ndarray:
+        up = section[y >= axis]
+        m = np.column_stack([up[:, 0], 2.0 * axis - up[:, 1]])
         # lo is inclusive: below the lowest vertex it is the mirror of the valley that ends the
         # upper flank, the plate's edge.
         return m[(m[:, 1] >= lo) & (m[:, 1] < hi)]
 
     for g in np.flatnonzero(np.diff(y) > p.shadow_gap):
-        c = crest_above(int(g) + 1)
+        c = _crest_above(z, int(g) + 1)
         if c > g + 1 or z[g + 1] > z_mid:
-            pieces.append(mirrored(c, y[g], y[g + 1]))
+            pieces.append(mirrored(_crest_height(section, c, p), y[g], y[g + 1]))
     if z[0] > z_mid:
-        c = crest_above(0)
-        # mirror down to the next valley above the crest (where the upper flank ends): the
-        # deepest vertex before z rises again by more than the slices' noise
-        k = j = c
-        while j + 1 < len(z) and z[j + 1] <= z[k] + VALLEY_RISE_M:
-            j += 1
-            k = j if z[j] < z[k] else k
-        pieces.append(mirrored(c, 2.0 * y[c] - y[k], y[0]))
+        c = _crest_above(z, 0)
+        axis = _crest_height(section, c, p)
+        half_pitch = _half_pitch(section, c, axis, p)
+        if half_pitch is None:
+            # one ridge: mirror down to the next valley above the crest (where the upper flank
+            # ends), the deepest vertex before z rises again by more than the slices' noise
+            k = j = c
+            while j + 1 < len(z) and z[j + 1] <= z[k] + VALLEY_RISE_M:
+                j += 1
+                k = j if z[j] < z[k] else k
+            pieces.append(mirrored(axis, 2.0 * axis - y[k], y[0]))
+        else:
+            # standard beams repeat one ridge: the plate's edge lies half a pitch below the
+            # crest, at the depth of the valleys (the flank above may stop short of its valley,
+            # in the shadow of the next ridge)
+            edge = axis - half_pitch
+            # the mirrored valley is the upper flank's end, sliced at a grazing view where the
+            # next ridge's shadow begins (biased outward): the edge vertex replaces its last
+            fill = mirrored(axis, edge + 0.5 * p.slice_interval, y[0])
+            pieces.append(np.vstack([fill, [[float(z.min()), edge]]]))
     out = np.vstack(pieces)
     return out[np.argsort(out[:, 1], kind="stable")]
+
+
+def _crest_above(z: np.ndarray, i: int) -> int:
+    """Index of the crest reached by climbing from vertex ``i``: the highest z before z falls
+    more than ``VALLEY_RISE_M`` below it (noise does not stop the climb)."""
+    best = j = i
+    while j + 1 < len(z) and z[j + 1] >= z[best] - VALLEY_RISE_M:
+        j += 1
+        best = j if z[j] > z[best] else best
+    return best
+
+
+def _crest_height(section: np.ndarray, c: int, p: BeamParams) -> float:
+    """Height y (m) of the crest at vertex ``c``: the vertex of a parabola z(y) fitted to the
+    ridge's top, the vertices within ``crest_depth`` of its highest z along the stretch around
+    ``c`` that stays above mid-depth without a shadowed gap.
+
+    The highest vertex alone is off by several mm on a sparse scan (the ridge is flat there,
+    and a grazing slice at a shadow's edge can top it); the fit stays within 1-2 mm. Falls
+    back to the highest vertex unless the fit has a maximum with two vertices on each side.
+    """
+    z, y = section[:, 0], section[:, 1]
+    z_mid = 0.5 * (z.min() + z.max())
+    lo = hi = c
+    while lo > 0 and z[lo - 1] > z_mid and y[lo] - y[lo - 1] <= p.shadow_gap:
+        lo -= 1
+    while hi + 1 < len(z) and z[hi + 1] > z_mid and y[hi + 1] - y[hi] <= p.shadow_gap:
+        hi += 1
+    ridge = np.arange(lo, hi + 1)
+    top = ridge[z[ridge] >= z[ridge].max() - p.crest_depth]
+    highest = float(y[ridge[np.argmax(z[ridge])]])
+    if len(top) < 4:
+        return highest
+    a, b, _ = np.polyfit(y[top] - y[c], z[top], 2)
+    if a >= 0:
+        return highest
+    vertex = y[c] - b / (2.0 * a)
+    # an extrapolated top is no measurement: the fit must have vertices on both sides
+    below = int((y[top] < vertex).sum())
+    return float(vertex) if min(below, len(top) - below) >= 2 else highest
+
+
+def _half_pitch(section: np.ndarray, c: int, axis: float, p: BeamParams) -> float | None:
+    """Half the distance (m) from the crest at ``axis`` (vertex ``c``) to the next crest above,
+    or None when no crest lies above (a single ridge)."""
+    z = section[:, 0]
+    z_mid = 0.5 * (z.min() + z.max())
+    j = c + 1
+    while j < len(z) and z[j] > z_mid:  # down the upper flank to the valley
+        j += 1
+    while j < len(z) and z[j] <= z_mid:
+        j += 1
+    if j >= len(z):
+        return None
+    k = _crest_above(z, j)
+    if k == len(z) - 1:
+        return None  # the section stops on the way up: no whole crest
+    return 0.5 * (_crest_height(section, k, p) - axis)
