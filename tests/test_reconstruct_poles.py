@@ -198,3 +198,30 @@ def test_a_pole_whose_foot_was_taken_for_road_still_stands_on_the_ground():
     det = detect_poles(xyz, ground[len(run.ground) :])
     _, z_err = _match(det, run.poles)
     assert z_err.max() < 0.02
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_posts_seen_over_a_narrow_arc_take_the_radius_that_fits_the_run(seed):
+    # A beam hides its posts: the scanner sees a 60-degree strip of each (facing +y, the road),
+    # except the end post beyond the beam, seen over half its round. A strip fits many radii
+    # equally well with its centre moved: the median of the posts' own radii was off, and the
+    # axes with it.
+    rng = np.random.default_rng(seed)
+    radius, bases = 0.07, [np.array([2.0 * k, 0.0, 0.0]) for k in range(5)]
+    posts = []
+    for k, base in enumerate(bases):
+        half = np.pi / 2 if k == 0 else np.pi / 6
+        t = rng.uniform(-half, half, 150)
+        r = radius + rng.normal(0, 0.004, 150)
+        ring = np.column_stack([np.sin(t), np.cos(t), np.zeros(150)])
+        posts.append(base + r[:, None] * ring + rng.uniform(0, 0.8, (150, 1)) * [0, 0, 1])
+    ground = np.column_stack(
+        [rng.uniform(-1, 9, 4000), rng.uniform(-1, 1, 4000), rng.normal(0, 0.003, 4000)]
+    )
+    ground = ground[np.min([np.hypot(*(ground[:, :2] - b[:2]).T) for b in bases], 0) > radius]
+    det = detect_poles(np.vstack(posts), ground)
+    assert len(det.poles) == 5
+    for pole in det.poles:
+        assert abs(pole.radius - radius) < 0.003
+        base = min(bases, key=lambda b: np.hypot(*(b[:2] - pole.position[:2])))
+        assert np.hypot(*(pole.position[:2] - base[:2])) < 0.004

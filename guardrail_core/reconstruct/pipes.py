@@ -914,6 +914,12 @@ class _Track:
             return my + slope * (x - mx), p.link_distance * math.sqrt(1.0 + slope * slope), slope
         return self.y[-1], p.link_distance + p.link_max_slope * abs(x - self.x[-1]), math.nan
 
+    def steered(self, p: PipeParams) -> bool:
+        """Whether the polyline has a direction to carry across empty slices (see predict)."""
+        start = self.last_own_x - p.direction_window
+        own = [x for x, sh in zip(self.x, self.shared, strict=True) if not sh and x >= start]
+        return len(own) >= 2 and own[-1] - own[0] >= 0.5 * p.direction_window
+
     def add(self, slice_index: int, x: float, y: float, comp: int, w: float, shared: bool) -> None:
         self.s.append(slice_index)
         self.x.append(x)
@@ -939,6 +945,7 @@ def _link_centres(
     order = np.lexsort((cy, cs))
     bounds = np.flatnonzero(np.diff(cs[order])) + 1
     reach = p.link_gap + p.slice_interval
+    step = 1.5 * p.slice_interval  # the next slice
     same_direction = math.tan(math.radians(p.link_same_angle))
     for group in np.split(order, bounds):
         if len(group) == 0:
@@ -946,7 +953,11 @@ def _link_centres(
         si = int(cs[group[0]])
         xc = float(cx[group].mean())
         gy = cy[group]
-        active = [t for t in tracks if xc - t.last_own_x <= reach and xc - t.x[-1] <= reach]
+        active = [
+            t
+            for t in tracks
+            if xc - t.last_own_x <= reach and xc - t.x[-1] <= (reach if t.steered(p) else step)
+        ]
         taken: dict[int, list[tuple[_Track, float]]] = {}
         if active:
             preds = np.array([t.predict(xc, p) for t in active])
