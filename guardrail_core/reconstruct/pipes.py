@@ -901,9 +901,8 @@ class _Track:
         at a crossing) within ``direction_window`` of its last own centre; it is trusted once they
         span half the window, before that the polyline may turn up to ``link_max_slope``.
         """
-        start = self.last_own_x - p.direction_window
-        own = [k for k in range(len(self.x)) if not self.shared[k] and self.x[k] >= start]
-        if len(own) >= 2 and self.x[own[-1]] - self.x[own[0]] >= 0.5 * p.direction_window:
+        own = self._steering(p)
+        if own is not None:
             xs = np.array([self.x[k] for k in own])
             ys = np.array([self.y[k] for k in own])
             ws = np.array([self.w[k] for k in own])
@@ -914,11 +913,19 @@ class _Track:
             return my + slope * (x - mx), p.link_distance * math.sqrt(1.0 + slope * slope), slope
         return self.y[-1], p.link_distance + p.link_max_slope * abs(x - self.x[-1]), math.nan
 
-    def steered(self, p: PipeParams) -> bool:
-        """Whether the polyline has a direction to carry across empty slices (see predict)."""
+    def _steering(self, p: PipeParams) -> list[int] | None:
+        """Indices of the own centres within ``direction_window`` of the last one when they
+        span half the window (the direction is known), else None."""
         start = self.last_own_x - p.direction_window
-        own = [x for x, sh in zip(self.x, self.shared, strict=True) if not sh and x >= start]
-        return len(own) >= 2 and own[-1] - own[0] >= 0.5 * p.direction_window
+        own = [k for k in range(len(self.x)) if not self.shared[k] and self.x[k] >= start]
+        if len(own) >= 2 and self.x[own[-1]] - self.x[own[0]] >= 0.5 * p.direction_window:
+            return own
+        return None
+
+    def steered(self, p: PipeParams) -> bool:
+        """Whether the polyline's direction is known (see predict): only then may it bridge
+        empty slices."""
+        return self._steering(p) is not None
 
     def add(self, slice_index: int, x: float, y: float, comp: int, w: float, shared: bool) -> None:
         self.s.append(slice_index)

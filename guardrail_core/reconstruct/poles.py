@@ -406,10 +406,9 @@ def detect_poles(
     accept = measured["accept"]
     if params.shared_radius and accept.any():
         # Poles of one run share a design: every stack is fitted again with the radius that
-        # fits the accepted poles together, fitting only the axis (a free radius on a
-        # half-seen pole trades off against the axis' offset from the road, and can take in a
-        # rail).
-        # posts off the poles' line (delineators) are not the run's design
+        # fits the accepted poles on the run's line together (a delineator off it is another
+        # design), fitting only the axis (a free radius on a half-seen pole trades off against
+        # the axis' offset from the road, and can take in a rail).
         member = measured["member_pole"]
         on_pole = (member >= 0) & accept[np.maximum(member, 0)]
         inline = accept & _consistent_offsets(
