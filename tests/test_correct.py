@@ -102,6 +102,88 @@ def test_a_segment_slightly_wider_than_the_run_within_the_margin_is_filled() -> 
     np.testing.assert_array_equal(correct_labels(labels, extents(*segments)), np.ones(10, bool))
 
 
+#: Two pipe rails seen across the road (lateral 2.0-2.03 m, 0.5-0.9 m up) and a slice with one
+#: of their posts: it stands on the ground and 9 cm behind the rails, a little above the top one.
+RAILS = (2.0, 2.03, 0.5, 0.9)
+POST = (2.0, 2.12, 0.12, 0.94)
+
+
+def _rails_with_posts(other: tuple[float, float, float, float] | None = None):
+    """Ten rail slices with posts at slices 2 and 6 labelled other, and ``other`` in slice 4."""
+    segments = [(s, POST if s in (2, 6) else RAILS) for s in range(10)]
+    labels = np.ones(10, bool)
+    labels[[2, 6]] = False
+    if other is not None:
+        segments.append((4, other))
+        labels = np.append(labels, False)
+    return labels, extents(*segments)
+
+
+def test_a_post_between_rails_becomes_guardrail() -> None:
+    """The post reaches 0.38 m below the rails and 9 cm behind them: outside their
+    cross-section, but a post (within post_width_m, at least halfway up the rails)."""
+    labels, ext = _rails_with_posts()
+    np.testing.assert_array_equal(correct_labels(labels, ext), np.ones(10, bool))
+    narrow = CorrectionParams(post_width_m=0.05)
+    np.testing.assert_array_equal(correct_labels(labels, ext, narrow), labels)
+
+
+@pytest.mark.parametrize(
+    "other",
+    [
+        (2.0, 2.1, 0.0, 0.2),  # a curb under the rails: not halfway up
+        (1.7, 1.9, 0.0, 0.75),  # a bollard 10 cm in front of the rails: too far beside them
+        (2.0, 2.1, 0.0, 2.5),  # a sign post in line with the rails: above their top
+        (2.0, 2.4, 0.1, 0.9),  # a hedge behind the rails: too deep
+        (2.05, 2.12, 0.45, 0.84),  # a bicycle rack's bars just behind the rails: off the ground
+    ],
+)
+def test_what_is_not_a_post_stays_other(other: tuple[float, float, float, float]) -> None:
+    labels, ext = _rails_with_posts(other)
+    corrected = correct_labels(labels, ext)
+    expected = np.ones(11, bool)
+    expected[10] = False
+    np.testing.assert_array_equal(corrected, expected)
+
+
+def test_a_hole_of_two_slices_is_filled() -> None:
+    labels = np.ones(10, bool)
+    labels[[4, 5]] = False
+    ext = extents(*run(range(10)))
+    np.testing.assert_array_equal(correct_labels(labels, ext), np.ones(10, bool))
+    one = CorrectionParams(max_hole_slices=1)
+    np.testing.assert_array_equal(correct_labels(labels, ext, one), labels)
+
+
+def test_a_hole_of_three_slices_is_not_filled() -> None:
+    labels = np.ones(10, bool)
+    labels[[4, 5, 6]] = False
+    np.testing.assert_array_equal(correct_labels(labels, extents(*run(range(10)))), labels)
+
+
+def test_two_lone_segments_three_slices_apart_do_not_make_a_run() -> None:
+    """Slices 3 and 6 are guardrail alone: the two other slices between them are no hole of a
+    run, and both lone segments become other."""
+    labels = np.zeros(10, bool)
+    labels[[3, 6]] = True
+    corrected = correct_labels(labels, extents(*run(range(10))))
+    np.testing.assert_array_equal(corrected, np.zeros(10, bool))
+
+
+def test_a_hole_of_two_next_to_a_filled_hole_of_one_is_filled() -> None:
+    """G . G . . G G: the run before the hole of two is a run once its hole of one is filled."""
+    labels = np.array([True, False, True, False, False, True, True])
+    corrected = correct_labels(labels, extents(*run(range(7))))
+    np.testing.assert_array_equal(corrected, np.ones(7, bool))
+
+
+def test_max_hole_slices_other_than_one_or_two_is_a_named_error() -> None:
+    with pytest.raises(GuardrailError, match="max_hole_slices"):
+        correct_labels(
+            np.ones(3, bool), extents(*run(range(3))), CorrectionParams(max_hole_slices=3)
+        )
+
+
 def test_a_segment_at_the_end_of_a_run_stays_other() -> None:
     """Other segments at slices 10 and -1 have guardrail neighbours on one side only."""
     segments = run(range(10)) + [(10, BEAM), (-1, BEAM)]

@@ -1,8 +1,9 @@
 """Label correction (§3.3): labels of sliced segments are made to agree with their neighbours.
 
 An isolated guardrail segment becomes "other"; an "other" segment inside a run of guardrail
-segments becomes "guardrail". Neighbours are segments of the same or the next slice along the
-trajectory whose extents beside and above the road touch.
+segments becomes "guardrail" when it lies within their cross-section or is one of the run's
+posts. Neighbours are segments of the same or the next slice along the trajectory whose extents
+beside and above the road touch.
 """
 
 from __future__ import annotations
@@ -27,6 +28,19 @@ class CorrectionParams:
     """An other segment inside a run becomes guardrail only if it lies within the lateral and
     height extent of its guardrail neighbours, widened by this many metres (so a curb or a
     sidewalk beside a guardrail stays other)."""
+    post_width_m: float = 0.15
+    """Metres. An other segment inside a run that stands on the ground (``post_foot_m``),
+    reaches at least halfway up its guardrail neighbours but no higher than their top (widened
+    by ``fill_margin_m``), and lies within this of them beside the road is a post and becomes
+    guardrail: a post stands below the rails and behind them (they are bolted to its face).
+    The classifier misses far posts' slices most often, and a missed post cuts the run there.
+    A curb beside or under the rails does not reach halfway up."""
+    post_foot_m: float = 0.3
+    """Metres. A post's segment reaches this close to the road surface (the road takes a far
+    post's lowest 0.15 m); a bicycle rack's bars behind a guardrail do not."""
+    max_hole_slices: int = 2
+    """1 or 2. Other segments inside a run are filled in holes of up to this many consecutive
+    slices (each segment of a hole of two fitting the guardrail segments on its side)."""
     min_run_slices: int = 2
     """A group of neighbouring guardrail segments spanning fewer slices than this is isolated and
     becomes other (the paper: an isolated segment)."""
@@ -82,6 +96,87 @@ def neighbour_pairs(
     return np.concatenate(pairs).astype(np.int64)
 
 
+def _guardrail_sides(
+    labels: np.ndarray,
+    pairs: np.ndarray,
+    slice_index: np.ndarray,
+    lateral: np.ndarray,
+    height: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Where each segment's guardrail neighbours are.
+
+    Returns ``before`` and ``after`` (S,) bool: it has a guardrail neighbour in an earlier or a
+    later slice; ``low`` and ``high`` (S, 2): the lowest and highest lateral offset and height
+    of its guardrail neighbours (metres; +inf and -inf where it has none).
+    """
+    n = len(labels)
+    before = np.zeros(n, bool)
+    after = np.zeros(n, bool)
+    low = np.full((n, 2), np.inf)
+    high = np.full((n, 2), -np.inf)
+    for a, b in ((pairs[:, 0], pairs[:, 1]), (pairs[:, 1], pairs[:, 0])):
+        from_guardrail = labels[b]
+        a, b = a[from_guardrail], b[from_guardrail]
+        before[a[slice_index[b] < slice_index[a]]] = True
+        after[a[slice_index[b] > slice_index[a]]] = True
+        np.minimum.at(low, a, np.stack([lateral[b, 0], height[b, 0]], axis=1))
+        np.maximum.at(high, a, np.stack([lateral[b, 1], height[b, 1]], axis=1))
+    return before, after, low, high
+
+
+def _run_span(labels: np.ndarray, pairs: np.ndarray, slice_index: np.ndarray) -> np.ndarray:
+    """(S,) int64: how many slices the run of neighbouring guardrail segments of each guardrail
+    segment spans (meaningless for other segments)."""
+    n = len(labels)
+    run_pairs = pairs[labels[pairs[:, 0]] & labels[pairs[:, 1]]]
+    graph = coo_matrix(
+        (np.ones(len(run_pairs), np.int8), (run_pairs[:, 0], run_pairs[:, 1])), shape=(n, n)
+    )
+    _, run = connected_components(graph, directed=False)
+    guardrail = np.flatnonzero(labels)
+    first = np.full(n, np.iinfo(np.int64).max)
+    last = np.full(n, np.iinfo(np.int64).min)
+    np.minimum.at(first, run[guardrail], slice_index[guardrail])
+    np.maximum.at(last, run[guardrail], slice_index[guardrail])
+    return last[run] - first[run] + 1
+
+
+def _fits_between(
+    lateral: np.ndarray,
+    height: np.ndarray,
+    low: np.ndarray,
+    high: np.ndarray,
+    params: CorrectionParams,
+) -> np.ndarray:
+    """(S,) bool: segments that lie within the cross-section of their guardrail neighbours or
+    are one of their posts.
+
+    ``lateral`` and ``height`` (S, 2) are each segment's extents; ``low`` and ``high`` (S, 2)
+    the lowest and highest lateral offset and height of its guardrail neighbours (infinite where
+    it has none: then it does not fit).
+    """
+    out = np.zeros(len(lateral), bool)
+    near = np.isfinite(low[:, 0])
+    lateral, height, low, high = lateral[near], height[near], low[near], high[near]
+    margin, post = params.fill_margin_m, params.post_width_m
+    below_top = height[:, 1] <= high[:, 1] + margin
+    within = (
+        (lateral[:, 0] >= low[:, 0] - margin)
+        & (lateral[:, 1] <= high[:, 0] + margin)
+        & (height[:, 0] >= low[:, 1] - margin)
+        & below_top
+    )
+    is_post = (
+        (height[:, 0] <= params.post_foot_m)
+        & (lateral[:, 0] >= low[:, 0] - post)
+        & (lateral[:, 1] <= high[:, 0] + post)
+        & (height[:, 1] >= 0.5 * (low[:, 1] + high[:, 1]))
+        & below_top
+    )
+    out[near] = within | is_post
+    return out
+
+
 def correct_labels(
     labels: np.ndarray, extents: SegmentExtents, params: CorrectionParams = CorrectionParams()
 ) -> np.ndarray:
@@ -111,48 +206,36 @@ def correct_labels(
     ):
         if len(array) != n:
             raise InvalidOptionError(f"correct_labels: {n} labels but {len(array)} rows of {name}")
+    if params.max_hole_slices not in (1, 2):
+        raise InvalidOptionError(f"max_hole_slices must be 1 or 2, got {params.max_hole_slices}")
     if n == 0:
         return labels
     slice_index = np.asarray(extents.slice_index, np.int64)
     pairs = neighbour_pairs(extents, params)
 
     # §3.3: an other segment inside a run becomes guardrail: it has guardrail neighbours in the
-    # slices before and after it and lies within their cross-section.
-    before = np.zeros(n, bool)
-    after = np.zeros(n, bool)
-    low = np.full((n, 2), np.inf)  # lowest lateral and height of the guardrail neighbours
-    high = np.full((n, 2), -np.inf)
+    # slices before and after it and lies within their cross-section (or is a post).
     lateral = np.asarray(extents.lateral, np.float64)
     height = np.asarray(extents.height, np.float64)
-    for a, b in ((pairs[:, 0], pairs[:, 1]), (pairs[:, 1], pairs[:, 0])):
-        from_guardrail = labels[b]
-        a, b = a[from_guardrail], b[from_guardrail]
-        before[a[slice_index[b] < slice_index[a]]] = True
-        after[a[slice_index[b] > slice_index[a]]] = True
-        np.minimum.at(low, a, np.stack([lateral[b, 0], height[b, 0]], axis=1))
-        np.maximum.at(high, a, np.stack([lateral[b, 1], height[b, 1]], axis=1))
-    margin = params.fill_margin_m
-    within = (
-        (lateral[:, 0] >= low[:, 0] - margin)
-        & (lateral[:, 1] <= high[:, 0] + margin)
-        & (height[:, 0] >= low[:, 1] - margin)
-        & (height[:, 1] <= high[:, 1] + margin)
-    )
-    labels |= before & after & within
+    before, after, low, high = _guardrail_sides(labels, pairs, slice_index, lateral, height)
+    fits = _fits_between(lateral, height, low, high, params)
+    fill = ~labels & before & after & fits
+    if params.max_hole_slices == 2:
+        # Two other segments in consecutive slices, each fitting the guardrail on its side,
+        # where that guardrail is a run of its own (holes of one filled): two isolated segments
+        # three slices apart do not make a run.
+        filled = labels | fill
+        in_run = filled & (_run_span(filled, pairs, slice_index) >= params.min_run_slices)
+        run_before, run_after, _, _ = _guardrail_sides(in_run, pairs, slice_index, lateral, height)
+        a, b = pairs[:, 0], pairs[:, 1]  # a in the lower slice
+        two = (slice_index[b] == slice_index[a] + 1) & ~labels[a] & ~labels[b]
+        two &= run_before[a] & fits[a] & run_after[b] & fits[b]
+        fill[a[two]] = True
+        fill[b[two]] = True
+    labels |= fill
 
     # §3.3: an isolated guardrail segment becomes other. Holes are filled first, so that a
     # misclassified segment next to a run's end does not leave the end segment isolated.
-    both = labels[pairs[:, 0]] & labels[pairs[:, 1]]
-    run_pairs = pairs[both]
-    graph = coo_matrix(
-        (np.ones(len(run_pairs), np.int8), (run_pairs[:, 0], run_pairs[:, 1])), shape=(n, n)
-    )
-    _, run = connected_components(graph, directed=False)
-    guardrail = np.flatnonzero(labels)
-    first = np.full(n, np.iinfo(np.int64).max)
-    last = np.full(n, np.iinfo(np.int64).min)
-    np.minimum.at(first, run[guardrail], slice_index[guardrail])
-    np.maximum.at(last, run[guardrail], slice_index[guardrail])
-    span = last[run] - first[run] + 1
-    labels[guardrail[span[guardrail] < params.min_run_slices]] = False
+    span = _run_span(labels, pairs, slice_index)
+    labels[labels & (span < params.min_run_slices)] = False
     return labels
