@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -10,6 +11,8 @@ import pytest
 from guardrail_core.errors import ReconstructionError
 from guardrail_core.reconstruct.poles import PoleParams, detect_poles, fit_circles
 from tests.reconstruct_fixtures import make_run
+
+DATA = Path(__file__).parent / "data"
 
 #: Horizontal error bound of a pole's ground point, metres (80 points, 5 mm range noise; the target is 20 mm).
 POSITION_TOL = 0.01
@@ -186,8 +189,8 @@ def test_a_pole_whose_foot_was_taken_for_road_still_stands_on_the_ground():
     xyz, ground = _feet_as_road(run, 0.16)
     det = detect_poles(xyz, ground)
     xy_err, z_err = _match(det, run.poles)
-    # The axis comes from the pole above the lowest rail (2 mm on whole poles, 11 mm here).
-    assert xy_err.max() < 0.015 and z_err.max() < 0.01
+    # The axis comes from the pole above the lowest rail (2 mm on whole poles, 7 mm here).
+    assert xy_err.max() < 0.01 and z_err.max() < 0.01
     whole = detect_poles(run.xyz, run.ground).poles  # heights as if the foot had been kept
     np.testing.assert_allclose([p.height for p in det.poles], [p.height for p in whole], atol=0.01)
     # Without the road points there is nothing under the cut poles: they stand 0.16 m up,
@@ -225,3 +228,29 @@ def test_posts_seen_over_a_narrow_arc_take_the_radius_that_fits_the_run(seed):
         assert abs(pole.radius - radius) < 0.003
         base = min(bases, key=lambda b: np.hypot(*(b[:2] - pole.position[:2])))
         assert np.hypot(*(pole.position[:2] - base[:2])) < 0.004
+
+
+def test_a_run_as_the_classifier_labelled_it_has_every_axis_on_its_pole():
+    # A pipe_verticals run of a simulated street (tests/data/README.md): the poles' lowest
+    # 0.15 m went to the road, leaving some 25 points per pole in the lowest 0.3 m, where
+    # circles 12 mm too big, 14 mm off the axes, fitted as well as the true ones.
+    data = np.load(DATA / "verticals_run_seed201.npz")
+    det = detect_poles(data["points"].astype(np.float64), data["ground"].astype(np.float64))
+    truth = data["poles"].astype(np.float64)
+    xy_err, z_err = _match(det, truth)
+    assert xy_err.max() < 0.003 and z_err.max() < 0.005
+    assert all(abs(p.radius - float(data["radius"])) < 0.002 for p in det.poles)
+
+
+def test_an_axis_beside_a_pole_is_that_pole():
+    # Rail ends stacked 0.11 m beside a pole, reaching the ground, fit a pole's circle: the
+    # axis with fewer points goes.
+    run = make_run(4, seed=15)
+    rng = np.random.default_rng(15)
+    along = (run.poles[3] - run.poles[2]) / np.linalg.norm(run.poles[3] - run.poles[2])
+    ends = _front_cylinder(rng, run.poles[2] + 0.11 * along, run.toward_road, 0.03, 0.8, 40)
+    xyz = np.vstack([run.xyz, ends])
+    xy_err, _ = _match(detect_poles(xyz, run.ground), run.poles)
+    assert xy_err.max() < POSITION_TOL
+    near = PoleParams(merge_distance_m=0.1)
+    assert len(detect_poles(xyz, run.ground, near).poles) == len(run.poles) + 1
