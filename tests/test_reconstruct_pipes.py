@@ -1,5 +1,7 @@
 """Pipe skeletons and radii from superimposed unit points (Matsumoto et al. 2019, §4.3)."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -312,3 +314,22 @@ def test_sparse_crossing_diagonals_are_two_straight_pipes(seed):
     truth = [[[0, 0.2], [LENGTH, 0.8]], [[0, 0.8], [LENGTH, 0.2]]]
     for axis in truth:
         assert min(_axis_error(np.array(axis), p) for p in rec.pipes[2:]) < 0.01
+
+
+def test_diagonals_that_ran_on_along_the_rails_are_cut_back_not_dropped():
+    # A diamond's points from 5 superimposed units of the units-sweep street
+    # (tests/data/README.md): three diagonals were chained on along a rail past their junction,
+    # and each chain, half of it along a rail, was dropped as the rail's duplicate.
+    data = np.load(Path(__file__).parent / "data" / "diamond_5_units.npz")
+    res = reconstruct_pipes(
+        data["points"].astype(np.float64), float(data["length"]), float(data["pole_radius"])
+    )
+    kinds = sorted(q.kind for q in res.pipes)
+    assert kinds == ["diagonal"] * 4 + ["horizontal"] * 2
+    design = [((0.3, 0.15), (1.0, 0.85)), ((1.0, 0.85), (1.7, 0.15)),
+              ((0.3, 0.85), (1.0, 0.15)), ((1.0, 0.15), (1.7, 0.85))]  # fmt: skip
+    ends = [sorted(map(tuple, q.axis[[0, -1], :2])) for q in res.pipes if q.kind == "diagonal"]
+    for a, b in design:
+        gap = [max(np.hypot(*np.subtract(e[0], min(a, b))), np.hypot(*np.subtract(e[1], max(a, b))))
+               for e in ends]  # fmt: skip
+        assert min(gap) < 0.03

@@ -23,7 +23,8 @@ The steps follow §4.3:
 5. polylines are smoothed by Taubin's low-pass filter, fitted by a straight line when nearly
    straight, snapped to horizontal when nearly horizontal;
 6. a chain's end that runs on along a rail past their junction is cut and given back to the
-   rail; ends near a pole are extended to the pole axis; ends near another pipe are extended to
+   rail (the part left shaped again, straight or curved); what still runs along a rail is its
+   duplicate and goes; ends near a pole are extended to the pole axis; ends near another pipe are extended to
    their intersection;
 7. the radius and the axis depth z of each pipe are measured from its points, per 0.1 m
    stretch along it (the median over the stretches: a junction sways a few of them).
@@ -422,12 +423,15 @@ def reconstruct_pipes(
     rest_idx = rest_idx[~short_mask]
     others = _non_vertical_pipes(pts, rest_idx, x0, p, notes)
 
-    others = [s for s in others if not _runs_along(s, lines, p)]
-    rails = lines + [s for s in others if s.kind == "horizontal"]
+    rails = lines + [s for s in others if s.kind == "horizontal" and not _runs_along(s, lines, p)]
+    others = [s for s in others if s.kind != "horizontal"]
     for s in others:
-        if s.kind != "horizontal":
-            _trim_along(s, rails, length, p)
-    skels = verticals + lines + others
+        if _trim_along(s, rails, length, p) and s.kind == "curved":
+            _reshape_cut(s, pts, p)
+    # A chain is a rail's duplicate when it still runs along one once its ends along rails are
+    # cut: a diagonal that took over a rail's points past its junction is not.
+    others = [s for s in others if not _runs_along(s, lines, p)]
+    skels = verticals + rails + others
     # §4.3: ends extended to the poles, and to the intersection of close ends.
     _extend_and_join(skels, length, p)
     # Radius and depth of each pipe from its points.
@@ -765,14 +769,14 @@ def _runs_along(s: _Skel, lines: list[_Skel], p: PipeParams) -> bool:
     return False
 
 
-def _trim_along(s: _Skel, lines: list[_Skel], length: float, p: PipeParams) -> None:
+def _trim_along(s: _Skel, lines: list[_Skel], length: float, p: PipeParams) -> bool:
     """Cut the ends of a chained skeleton that run along a rail (a straight pipe, taken from
     pole to pole), within ``line_band`` of it for ``join_distance / 5`` or more: past a junction
     the chain took over the rail's points (an arch's foot running on along its rail). The rail
     runs on through them: its end is moved out to the last of them. The cut end is joined to the
-    rail again by :func:`_extend_and_join`."""
+    rail again by :func:`_extend_and_join`. Returns whether it was cut."""
     if not lines or len(s.xy) < 3:
-        return
+        return False
     near = np.full(len(s.xy), -1)
     best = np.full(len(s.xy), np.inf)
     for j, line in enumerate(lines):
@@ -786,7 +790,7 @@ def _trim_along(s: _Skel, lines: list[_Skel], length: float, p: PipeParams) -> N
         near[closer], best[closer] = j, dist[closer]
     along = near >= 0
     if along.all() or not along.any():
-        return
+        return False
     step = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(s.xy, axis=0), axis=1))])
     first, last = int(np.argmin(along)), len(along) - 1 - int(np.argmin(along[::-1]))
     cut_head = step[first] >= p.join_distance / 5
@@ -798,6 +802,16 @@ def _trim_along(s: _Skel, lines: list[_Skel], length: float, p: PipeParams) -> N
             if cut:
                 _run_on(lines[int(near[tip])], s.xy[tip])
         s.xy = s.xy[(first if cut_head else 0) : (last + 1 if cut_tail else len(along))]
+        return True
+    return False
+
+
+def _reshape_cut(s: _Skel, pts: np.ndarray, p: PipeParams) -> None:
+    """A curved chain cut down to its own part is shaped again from that part and its points
+    near it: a diagonal that ran on along a rail is straight once the rail's part is cut."""
+    own = s.idx[_distance_to_polyline(pts[s.idx, :2], s.xy)[0] <= p.link_distance]
+    if len(own) >= 2:
+        s.xy, s.kind = _straight_or_curved(s.xy, np.zeros(len(s.xy), bool), own, s.idx, pts, p)
 
 
 def _run_on(line: _Skel, point: np.ndarray) -> None:
@@ -1196,13 +1210,28 @@ def _shape_polyline(
     smooth = taubin_smooth(
         centres, lam=p.taubin_lambda, mu=p.taubin_mu, iterations=p.taubin_iterations
     )
+    extras = {"centres": centres, "shared": shared, "own": own_idx}
+    xy, kind = _straight_or_curved(smooth, shared, own_idx, idx, pts, p)
+    return _Skel(xy=xy, kind=kind, idx=idx, extras=extras)
+
+
+def _straight_or_curved(
+    smooth: np.ndarray,
+    shared: np.ndarray,
+    own_idx: np.ndarray,
+    idx: np.ndarray,
+    pts: np.ndarray,
+    p: PipeParams,
+) -> tuple[np.ndarray, str]:
+    """A smoothed polyline (K, 2) kept as it is ("curved"), or, when straight, the line fitted
+    to its own points (``own_idx``, else ``idx``) snapped horizontal or vertical when nearly so:
+    (xy (K, 2) or (2, 2), kind)."""
     fit_on = smooth[~shared] if (~shared).sum() >= 2 else smooth
     c, d = _fit_line(fit_on)
     normal = np.array([-d[1], d[0]])
     dev = np.abs((smooth - c) @ normal)
-    extras = {"centres": centres, "shared": shared, "own": own_idx}
     if np.quantile(dev, p.straight_share) > p.straight_tolerance:
-        return _Skel(xy=smooth, kind="curved", idx=idx, extras=extras)
+        return smooth, "curved"
     # Straight: fit the line to the pipe's own points (components not shared at crossings).
     pxy = pts[own_idx if len(own_idx) >= 2 else idx, :2]
     c2, d2 = _fit_line(pxy)
@@ -1222,8 +1251,7 @@ def _shape_polyline(
         t = smooth[:, 1] - c2[1]
     else:
         kind = "diagonal"
-    xy = c2 + np.outer([t.min(), t.max()], d2)
-    return _Skel(xy=xy, kind=kind, idx=idx, extras=extras)
+    return c2 + np.outer([t.min(), t.max()], d2), kind
 
 
 def _distance_to_polyline(q: np.ndarray, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
