@@ -333,3 +333,33 @@ def test_diagonals_that_ran_on_along_the_rails_are_cut_back_not_dropped():
         gap = [max(np.hypot(*np.subtract(e[0], min(a, b))), np.hypot(*np.subtract(e[1], max(a, b))))
                for e in ends]  # fmt: skip
         assert min(gap) < 0.03
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_slice_components_are_those_of_each_slices_delaunay_wireframe(seed):
+    # §4.3: the components of each 30 mm slice's Delaunay wireframe with edges longer than
+    # max_edge cut, which the k-d tree's pairs within max_edge give too; points on a line
+    # (one slice of a scan line) included.
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import Delaunay
+
+    from guardrail_core.reconstruct.pipes import _slice_components
+
+    rng = np.random.default_rng(seed)
+    p = PipeParams()
+    line = np.column_stack([np.full(30, 0.52), np.linspace(0.1, 0.9, 30)])
+    xy = np.vstack([rng.uniform([0.05, 0.0], [1.95, 1.0], (3000, 2)), line])
+    s, labels = _slice_components(xy, 0.05, p)
+    rows, cols = [], []
+    for k in np.unique(s):
+        idx = np.flatnonzero(s == k)
+        tri = Delaunay(xy[idx], qhull_options="QJ").simplices
+        rows.append(idx[tri].ravel())
+        cols.append(idx[np.roll(tri, 1, axis=1)].ravel())
+    a, b = np.concatenate(rows), np.concatenate(cols)
+    cut = np.linalg.norm(xy[a] - xy[b], axis=1) <= p.max_edge
+    graph = coo_matrix((np.ones(int(cut.sum())), (a[cut], b[cut])), shape=(len(xy),) * 2)
+    _, truth = connected_components(graph, directed=False)
+    pairs = set(zip(labels.tolist(), truth.tolist(), strict=True))
+    assert len(pairs) == len(set(labels.tolist())) == len(set(truth.tolist()))
