@@ -25,8 +25,8 @@ The steps follow §4.3:
    straight, snapped to horizontal when nearly horizontal;
 6. a chain's end that runs on along a rail past their junction is cut and given back to the
    rail (the part left shaped again, straight or curved); what still runs along a rail is its
-   duplicate and goes; ends near a pole are extended to the pole axis; ends near another pipe are extended to
-   their intersection;
+   duplicate and goes; ends near a pole are extended to the pole axis; ends near another pipe
+   are extended to their intersection;
 7. the radius and the axis depth z of each pipe are measured from its points, per 0.1 m
    stretch along it (the median over the stretches: a junction sways a few of them).
 
