@@ -12,6 +12,7 @@ from fastapi.staticfiles import StaticFiles
 from app.auth import require_token
 from app.jobs import JobRunner
 from app.routers import info, labels, queue, reconstruction, segments, training
+from app.schemas import UNAUTHORIZED
 from app.session import ReviewSession
 
 #: The pages (``static/`` at the repository root, beside ``app/``).
@@ -49,7 +50,7 @@ def create_app(
     app.state.scene_clients = scene_clients
     guarded = [Depends(require_token)]
     for module in (info, segments, labels, queue, training, reconstruction):
-        app.include_router(module.router, dependencies=guarded)
+        app.include_router(module.router, dependencies=guarded, responses=UNAUTHORIZED)
     if STATIC_DIR.is_dir():
         app.mount("/static", StaticFiles(directory=STATIC_DIR), name="static")
 

@@ -1,7 +1,7 @@
 """The models an operator can activate: those fine-tuned in the app, and the one that made the run.
 
 Each fine-tuned model is a model folder ``REVIEW_DIR/models/<version>/`` (see
-:mod:`guardrail_core.extract.model_store`). The active model is the one whose predictions the run
+:mod:`guardrail_core.extract.model_folder`). The active model is the one whose predictions the run
 folder holds (``run.json``'s ``model.version``): activating a model re-predicts the run and writes
 its predictions into the run folder.
 """
@@ -13,8 +13,8 @@ from pathlib import Path
 from typing import Any
 
 from guardrail_core.extract.classify import GuardrailClassifier
-from guardrail_core.extract.model_store import MODEL_FILE, load_model, save_model
-from guardrail_core.run_folder import Run
+from guardrail_core.extract.model_folder import MODEL_FILE, load_model, save_model
+from guardrail_core.formats.run_folder import Run
 
 
 class UnknownModelError(KeyError):
@@ -38,7 +38,7 @@ class ModelRegistry:
 
     @property
     def active_version(self) -> str:
-        return str(self.run.info["model"]["version"])
+        return self.run.info.model.version
 
     def _folders(self) -> dict[str, Path]:
         folders: dict[str, Path] = {}
@@ -62,7 +62,7 @@ class ModelRegistry:
                 {
                     "version": self.active_version,
                     "created": None,
-                    "mode": self.run.info["model"].get("mode"),
+                    "mode": self.run.info.model.mode,
                     "held_out": None,
                     "held_out_current": None,
                     "active": True,

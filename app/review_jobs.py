@@ -10,8 +10,8 @@ import numpy as np
 
 from app.session import ReviewSession
 from guardrail_core.extract.classify import ClassifierParams
-from guardrail_core.reconstruction import ReconstructionParams, reconstruct_into
-from guardrail_core.review_training import predict_run, train_from_run, write_predictions
+from guardrail_core.reconstruct.pipeline import ReconstructionParams, reconstruct_into
+from guardrail_core.review.training import predict_run, train_from_run, write_predictions
 
 Report = Callable[[float, str], None]
 
@@ -38,7 +38,7 @@ def fine_tune(
             "version": trained.model.version,
             "metrics_new": trained.metrics_new,
             "metrics_current": trained.metrics_current,
-            "current_version": run.info["model"]["version"],
+            "current_version": run.info.model.version,
             "held_out_segments": int(trained.held_out.sum()),
             "seconds": round(trained.seconds, 2),
         }
@@ -87,6 +87,6 @@ def reconstruct(
             params=params,
         )
         session.notify("reconstruction", np.zeros(0, np.int64))
-        return {"summary": summary}
+        return {"summary": summary.to_json()}
 
     return work

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from app.session import ReviewSession
-from guardrail_core.extract.crops import CROP_OK, CROP_STATUS_NAMES
+from guardrail_core.formats.run_folder import CROP_OK, CROP_STATUS_NAMES
 
 SORTS = ("id", "uncertainty", "probability", "-probability")
 

@@ -14,6 +14,7 @@ from app.main import create_app
 from app.scene.viewer import ReviewScene
 from app.session import ReviewSession
 from guardrail_core.errors import InvalidOptionError, RunFolderError
+from guardrail_core.formats.run_folder_paths import RunFolder
 
 
 def default_run(drive: Path) -> Path:
@@ -25,7 +26,7 @@ def default_run(drive: Path) -> Path:
         There is none: the caller must name the run folder.
     """
     candidate = Path(drive).resolve().parent / "run"
-    if not (candidate / "run.json").is_file():
+    if not RunFolder(candidate).exists():
         raise RunFolderError(
             f"no run folder given and none at {candidate}; process the drive with "
             "`guardrail process DRIVE --model MODEL --out RUN` and pass --run RUN"

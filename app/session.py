@@ -18,12 +18,13 @@ import numpy as np
 
 from app.model_registry import ModelRegistry
 from app.segment_index import SegmentIndex
-from guardrail_core.drive import Drive, load_drive
 from guardrail_core.errors import InvalidOptionError, RunFolderError
-from guardrail_core.evaluate import segment_truth
-from guardrail_core.label_store import LABEL_GUARDRAIL, LABEL_OTHER, LabelChange, LabelStore
-from guardrail_core.review_training import segment_labels
-from guardrail_core.run_folder import Run, load_run
+from guardrail_core.extract.segment_truth import segment_truth
+from guardrail_core.formats.drive import Drive, load_drive
+from guardrail_core.formats.label_store import LABEL_GUARDRAIL, LABEL_OTHER, LabelChange, LabelStore
+from guardrail_core.formats.run_folder import Run
+from guardrail_core.formats.run_folder_paths import RunFolder
+from guardrail_core.review.training import segment_labels
 
 #: What the review app writes lives in this folder of the drive: labels outlive run folders.
 REVIEW_DIR = "review"
@@ -58,7 +59,8 @@ class ReviewSession:
     Raises
     ------
     RunFolderError
-        The run was made from a drive with another number of points.
+        ``run_path`` is not a run folder of this format version, or it was made from a drive
+        with another number of points.
     """
 
     def __init__(
@@ -71,7 +73,8 @@ class ReviewSession:
         model_dir: str | Path | None = None,
     ) -> None:
         self.drive: Drive = load_drive(drive_path)
-        self.run: Run = load_run(run_path)
+        self.folder = RunFolder.open(run_path)  # every path of the run, its format checked
+        self.run: Run = self.folder.load()
         n = len(self.drive.points)
         if len(self.run.point_segment) != n:
             raise RunFolderError(
@@ -201,7 +204,7 @@ class ReviewSession:
     def reload_run(self) -> None:
         """Read the run folder again (after a model's predictions were written into it)."""
         with self.lock:
-            self.run = load_run(self.run.root)
+            self.run = self.folder.load()
             self.models.run = self.run
         self.notify("predictions", np.arange(self.n_segments))
 

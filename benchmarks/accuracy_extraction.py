@@ -33,14 +33,15 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from guardrail_core.drive import load_drive  # noqa: E402
-from guardrail_core.evaluate import detection_metrics, segment_truth  # noqa: E402
+from guardrail_core.evaluate.detection import detection_metrics  # noqa: E402
 from guardrail_core.extract.classify import ClassifierParams  # noqa: E402
-from guardrail_core.pipeline import process_drive  # noqa: E402
-from guardrail_core.run_folder import load_run  # noqa: E402
+from guardrail_core.extract.segment_truth import segment_truth  # noqa: E402
+from guardrail_core.extract.training import train_from_drives  # noqa: E402
+from guardrail_core.formats.drive import load_drive  # noqa: E402
+from guardrail_core.formats.run_folder import load_run  # noqa: E402
+from guardrail_core.process import process_drive  # noqa: E402
 from guardrail_core.synth.scene import random_scene_spec  # noqa: E402
 from guardrail_core.synth.simulate import simulate_drive  # noqa: E402
-from guardrail_core.training import train_from_drives  # noqa: E402
 
 LENGTH_M = 150.0
 DESIGNS_A = ["pipe_simple_2", "pipe_ladder", "pipe_diamond", "pipe_arch", "beam_w"]
@@ -90,7 +91,7 @@ def run_experiment(name: str, data: Path, mode: str) -> dict:
             per_drive.append(
                 {
                     "drive": path.name,
-                    "detection": detection_metrics(truth, run.segments["label"]),
+                    "detection": detection_metrics(truth, run.segments["label"]).to_json(),
                 }
             )
     truth = np.concatenate(truths)
@@ -102,8 +103,8 @@ def run_experiment(name: str, data: Path, mode: str) -> dict:
         "train_seconds": round(train_s, 1),
         "trained_on": model.info.get("trained_on", {}),
         "held_out": model.info.get("metrics", {}).get("held_out", {}),
-        "detection": detection_metrics(truth, np.concatenate(labels)),
-        "detection_raw": detection_metrics(truth, np.concatenate(raws)),
+        "detection": detection_metrics(truth, np.concatenate(labels)).to_json(),
+        "detection_raw": detection_metrics(truth, np.concatenate(raws)).to_json(),
         "per_drive": per_drive,
     }
 

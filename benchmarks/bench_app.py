@@ -22,8 +22,8 @@ on a viser server of a free local port (8700 and up):
    Then ``scene.show_window(start)`` for windows not shown before. Loading the session (reading
    the drive and the run) is reported once as "load".
 3. **Fast-mode retrain on 2,000 labelled crops** (target <= 20 s):
-   :func:`guardrail_core.review_training.train_from_run` in fast mode on the run; when the run
-   has fewer than 2,000 crops, also :func:`guardrail_core.training.train_on_set` on the run's
+   :func:`guardrail_core.review.training.train_from_run` in fast mode on the run; when the run
+   has fewer than 2,000 crops, also :func:`guardrail_core.extract.training.train_on_set` on the run's
    training set concatenated with itself (each copy's blocks kept apart) until it has 2,000
    crops, which is the figure judged against the target.
 4. **Live re-run of one unit model** (target < 250 ms): ``RunTuner(run).retune(run_id, params)``
@@ -66,9 +66,9 @@ from guardrail_core.errors import GuardrailError  # noqa: E402
 from guardrail_core.extract.classify import ClassifierParams  # noqa: E402
 from guardrail_core.extract.segment_head import SegmentHeadParams  # noqa: E402
 from guardrail_core.extract.track import track_coordinates  # noqa: E402
-from guardrail_core.reconstruction import RECONSTRUCTION_DIR, ReconstructionParams  # noqa: E402
-from guardrail_core.review_training import train_from_run, training_set_from_run  # noqa: E402
-from guardrail_core.training import TrainingSet, train_on_set  # noqa: E402
+from guardrail_core.extract.training import TrainingSet, train_on_set  # noqa: E402
+from guardrail_core.reconstruct.pipeline import ReconstructionParams  # noqa: E402
+from guardrail_core.review.training import train_from_run, training_set_from_run  # noqa: E402
 
 TARGET_RELABEL_S = 0.1
 TARGET_SCENE_S = 3.0
@@ -242,7 +242,7 @@ def bench_retrain(session: ReviewSession, repeats: int) -> dict[str, Any]:
     for _ in range(repeats):
         s, _ = timed(train_from_run, run, labels, params=params)
         from_run.append(s)
-    data = training_set_from_run(run, labels, mode="fast", input_size=params.input_size)
+    data = training_set_from_run(run, labels, mode="fast", input_size=params.input_size_px)
     n_crops = int(data.has_crop.sum())
     result: dict[str, Any] = {
         "segments": len(data.labels),
@@ -275,7 +275,7 @@ def slider_params(base: ReconstructionParams, step: int) -> ReconstructionParams
     """Thresholds an operator might try: every repeat moves the sliders a little."""
     factor = 1.0 + 0.05 * ((step % 3) - 1)
     params = base
-    for name in ("histogram_factor", "radius_share", "slice_interval"):
+    for name in ("histogram_factor", "radius_share", "slice_interval_m"):
         value = getattr(base.pipes, name) * factor
         params = with_value(
             params, "pipes", name, min(value, 0.99) if name == "radius_share" else value
@@ -287,12 +287,10 @@ def slider_params(base: ReconstructionParams, step: int) -> ReconstructionParams
 
 
 def bench_retune(run_root: Path, repeats: int) -> dict[str, Any]:
-    if not (run_root / RECONSTRUCTION_DIR).is_dir():
-        return {"skipped": f"{run_root} has no {RECONSTRUCTION_DIR}/ (run `guardrail reconstruct`)"}
     try:
         tuner = RunTuner(run_root)
-    except (GuardrailError, OSError, KeyError) as exc:
-        return {"skipped": f"{run_root / RECONSTRUCTION_DIR}: cannot be re-run ({exc})"}
+    except (GuardrailError, OSError, KeyError) as exc:  # no reconstruction, or an unreadable one
+        return {"skipped": f"{run_root}: its reconstruction cannot be re-run ({exc})"}
     rows = []
     for model_run in tuner.tunable_runs():
         assert model_run.model is not None

@@ -35,14 +35,14 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from guardrail_core.drive import load_drive  # noqa: E402
 from guardrail_core.extract.classify import ClassifierParams, train_classifier  # noqa: E402
 from guardrail_core.extract.crops import CROP_OK  # noqa: E402
 from guardrail_core.extract.lattice import build_lattice  # noqa: E402
+from guardrail_core.extract.pipeline import extract, slice_drive  # noqa: E402
 from guardrail_core.extract.road import remove_road  # noqa: E402
 from guardrail_core.extract.segments import SegmentParams, wireframe_components  # noqa: E402
 from guardrail_core.extract.track import track_coordinates  # noqa: E402
-from guardrail_core.pipeline import extract, slice_drive  # noqa: E402
+from guardrail_core.formats.drive import load_drive  # noqa: E402
 from guardrail_core.timing import StageTimer  # noqa: E402
 
 TARGET_POINTS_PER_S = 1_000_000
@@ -128,7 +128,7 @@ def bench_dbscan(drive) -> dict:
 
 
 def bench_inference(drive) -> dict:
-    result = extract(drive, ClassifierParams().input_size)
+    result = extract(drive, ClassifierParams().input_size_px)
     crops = result.crops[result.choice.status == CROP_OK]
     rng = np.random.default_rng(0)
     labels = rng.random(len(crops)) < 0.5  # the head's weights do not change its speed

@@ -28,20 +28,17 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
-
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from guardrail_core.drive import load_drive  # noqa: E402
-from guardrail_core.reconstruction import (  # noqa: E402
-    RECONSTRUCTION_DIR,
+from guardrail_core.formats.drive import load_drive  # noqa: E402
+from guardrail_core.formats.run_folder import POINT_ROAD, load_run  # noqa: E402
+from guardrail_core.reconstruct.pipeline import (  # noqa: E402
     ReconstructionParams,
     guardrail_mask,
-    load_reconstruction,
     reconstruct_guardrails,
     unit_model,
 )
-from guardrail_core.run_folder import POINT_ROAD, load_run  # noqa: E402
+from guardrail_core.reconstruct.run_models import load_run_models  # noqa: E402
 
 TARGET_RERUN_S = 0.25
 
@@ -51,7 +48,7 @@ def slider_params(base: ReconstructionParams, step: int) -> ReconstructionParams
     pipes = base.pipes
     factor = 1.0 + 0.05 * ((step % 3) - 1)
     changes: dict[str, float | int] = {}
-    for name in ("histogram_factor", "radius_share", "slice_interval"):
+    for name in ("histogram_factor", "radius_share", "slice_interval_m"):
         value = getattr(pipes, name)
         changes[name] = min(value * factor, 0.99) if name == "radius_share" else value * factor
     changes["taubin_iterations"] = pipes.taubin_iterations + step % 3
@@ -67,7 +64,7 @@ def main() -> int:
     args = parser.parse_args()
 
     run = load_run(args.run)
-    drive = load_drive(args.drive or run.info["drive"]["path"], with_truth=False)
+    drive = load_drive(args.drive or run.info.drive.path, with_truth=False)
     guardrail = guardrail_mask(run.point_segment, run.segments["label"])
     ground = run.point_segment == POINT_ROAD
     params = ReconstructionParams()
@@ -80,15 +77,12 @@ def main() -> int:
         )
         whole.append(time.perf_counter() - start)
 
-    runs, _ = load_reconstruction(args.run)
-    with np.load(args.run / RECONSTRUCTION_DIR / "superimposed.npz") as data:
-        stored = {k: data[k] for k in data.files}
+    models = load_run_models(args.run)
     reruns = []
-    for model_run in runs:
-        key = f"run_{model_run.run_id:03d}_points"
-        if model_run.model is None or key not in stored:
+    for model_run in models.runs:
+        if model_run.model is None:
             continue
-        points = stored[key].astype(np.float64)
+        points = models.superimposed_points(model_run.run_id)
         seconds = []
         for step in range(args.repeats):
             start = time.perf_counter()

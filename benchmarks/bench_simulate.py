@@ -60,7 +60,7 @@ def run(repeats: int, length: float, seed: int) -> dict:
         "length_m": length,
         "seed": seed,
         "repeats": repeats,
-        "measurements_per_s": options.scanner.measurements_per_second,
+        "measurements_per_s": options.scanner.measurement_rate_hz,
         "image_size": list(options.image_size),
         "image_every_m": options.image_every_m,
         "runs": runs,

@@ -19,13 +19,13 @@ from pathlib import Path
 
 import numpy as np
 
-from guardrail_core.drive import load_drive
-from guardrail_core.evaluate import segment_truth
 from guardrail_core.extract.classify import classification_metrics
 from guardrail_core.extract.correct import correct_labels
 from guardrail_core.extract.crops import CROP_OK
-from guardrail_core.extract.model_store import load_model
-from guardrail_core.pipeline import ExtractionParams, extract
+from guardrail_core.extract.model_folder import load_model
+from guardrail_core.extract.pipeline import ExtractionParams, extract
+from guardrail_core.extract.segment_truth import segment_truth
+from guardrail_core.formats.drive import load_drive
 
 PATHS = ("crop CNN alone", "geometry alone", "fused")
 

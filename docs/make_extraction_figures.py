@@ -37,10 +37,10 @@ from make_figures import (  # noqa: E402
     write_png,
 )
 
-from guardrail_core.drive import Drive, load_drive  # noqa: E402
-from guardrail_core.evaluate import segment_truth  # noqa: E402
 from guardrail_core.extract.crops import CROP_OK  # noqa: E402
-from guardrail_core.run_folder import Run, load_run  # noqa: E402
+from guardrail_core.extract.segment_truth import segment_truth  # noqa: E402
+from guardrail_core.formats.drive import Drive, load_drive  # noqa: E402
+from guardrail_core.formats.run_folder import Run, load_run  # noqa: E402
 
 FOUND = (235, 30, 30)
 OTHER = (70, 130, 220)

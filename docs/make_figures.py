@@ -31,8 +31,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from guardrail_core.classes import GUARDRAIL_CLASSES, TruthClass  # noqa: E402
-from guardrail_core.drive import Drive, ImageRecord, load_drive  # noqa: E402
-from guardrail_core.geometry import invert_transform, transform_points  # noqa: E402
+from guardrail_core.formats.drive import Drive, ImageRecord, load_drive  # noqa: E402
+from guardrail_core.geom.frames import invert_transform, transform_points  # noqa: E402
 
 MAX_BYTES = 600_000
 PROJECTION_RANGE_M = 25.0

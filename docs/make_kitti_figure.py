@@ -22,11 +22,11 @@ import numpy as np
 import trimesh
 from matplotlib.collections import PolyCollection
 
-from guardrail_core.drive import load_drive
-from guardrail_core.extract.model_store import DEFAULT_MODEL_DIR, load_model
+from guardrail_core.extract.model_folder import DEFAULT_MODEL_DIR, load_model
+from guardrail_core.formats.drive import load_drive
+from guardrail_core.formats.run_folder import load_run
 from guardrail_core.importers.kitti import import_kitti
-from guardrail_core.pipeline import process_drive
-from guardrail_core.run_folder import load_run
+from guardrail_core.process import process_drive
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_SEQUENCE = ROOT.parent / "shared" / "realdata" / "kitti-odometry" / "sequences" / "01"
@@ -44,7 +44,7 @@ def main() -> None:
         run = load_run(Path(tmp) / "run")
         meshes = {
             p.stem: trimesh.load(p, force="mesh")
-            for p in sorted((Path(tmp) / "run" / "reconstruction" / "meshes").glob("run_*.ply"))
+            for p in run.folder.reconstruction.mesh_files("ply").values()
         }
     xyz = drive.points.xyz
     segment = run.point_segment

@@ -26,15 +26,16 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from guardrail_core.drive import load_drive  # noqa: E402
-from guardrail_core.evaluate_reconstruction import (  # noqa: E402
+from guardrail_core.errors import RunFolderError  # noqa: E402
+from guardrail_core.evaluate.reconstruction import (  # noqa: E402
     ReconstructionMatch,
     evaluate_reconstruction,
     match_poles,
     measured_units,
     truth_guardrails,
 )
-from guardrail_core.reconstruction import RECONSTRUCTION_DIR, load_reconstruction  # noqa: E402
+from guardrail_core.formats.drive import load_drive  # noqa: E402
+from guardrail_core.reconstruct.run_models import load_run_models  # noqa: E402
 
 
 def main() -> int:
@@ -50,13 +51,12 @@ def main() -> int:
     import matplotlib.pyplot as plt
 
     drive = load_drive(args.drive)
-    runs, _ = load_reconstruction(args.run)
-    with np.load(args.run / RECONSTRUCTION_DIR / "superimposed.npz") as data:
-        stored = {k: data[k] for k in data.files}
+    models = load_run_models(args.run)
+    runs = list(models.runs)
     truths = truth_guardrails(drive.truth.objects)
     matched, _ = match_poles(runs, truths, ReconstructionMatch())
     result = evaluate_reconstruction(runs, drive.truth.objects)
-    found = {r["run_id"]: r for r in result["runs"] if r["run_id"] is not None}
+    found = {r.run_id: r for r in result.runs if r.run_id is not None}
 
     panels = []
     for ri, run in enumerate(runs):
@@ -71,7 +71,10 @@ def main() -> int:
     for ax in np.ravel(axes)[len(panels) :]:
         ax.axis("off")
     for ax, (run, truth, units) in zip(np.ravel(axes), panels, strict=False):
-        points = stored.get(f"run_{run.run_id:03d}_points", np.zeros((0, 3)))
+        try:
+            points = models.superimposed_points(run.run_id)
+        except RunFolderError:  # a run without superimposed points
+            points = np.zeros((0, 3))
         model = run.model
         _, frame, true_unit = units[0]
         if model.type == "beam":
@@ -81,7 +84,7 @@ def main() -> int:
             if model.section is not None:
                 ax.plot(*model.section.T, color="#1f4e9c", lw=1.3)
             ax.set_xlabel("z toward the road (m)")
-            figure = found[run.run_id]["beam_section_hausdorff_mm"]
+            figure = found[run.run_id].beam_section_hausdorff_mm
             caption = f"section within {figure:.1f} mm" if figure is not None else "no section"
             ax.set_aspect("equal")
         else:
@@ -94,7 +97,7 @@ def main() -> int:
             for pipe in model.pipes:
                 ax.plot(pipe.axis[:, 0] * scale, pipe.axis[:, 1], color="#1f4e9c", lw=1.3)
             record = found[run.run_id]
-            caption = f"{record['pipes_found']}/{record['pipes_total']} pipes found"
+            caption = f"{record.pipes_found}/{record.pipes_total} pipes found"
             ax.set_xlim(-0.1, frame.length + 0.1)
             ax.set_xlabel("x along the unit (m)")
         ax.set_ylim(-0.05, 1.2)

@@ -44,8 +44,26 @@ class InvalidOptionError(GuardrailError):
     """An option (of a command or a function) is outside its valid range."""
 
 
-class OutputExistsError(GuardrailError):
+class OutputError(GuardrailError):
+    """An output (a file or folder a command writes) cannot be written where it was asked."""
+
+
+class OutputExistsError(OutputError):
     """The output folder exists and is not empty; nothing is overwritten without asking."""
+
+
+class InputInsideOutputError(OutputExistsError):
+    """Writing the output would delete or overwrite an input: the output is an input, holds one,
+    or lies inside an input folder whose content it would replace."""
+
+
+class OutputKindError(OutputExistsError):
+    """The output path exists as the other kind: a file where a folder is written, or a folder
+    where a file is written."""
+
+
+class OutputSymlinkError(OutputError):
+    """The output path is a symbolic link; replacing it would swap the link, not what it names."""
 
 
 class EmptyDriveError(DriveError):
@@ -70,6 +88,22 @@ class TrainingDataError(GuardrailError):
 
 class RunFolderError(GuardrailError):
     """A run folder is missing a file or does not match the drive it is evaluated against."""
+
+
+class NotARunFolderError(RunFolderError):
+    """The folder is not a run folder (it has no ``run.json``)."""
+
+
+class RunFormatVersionError(RunFolderError):
+    """``run.json`` was written by another format version of the run folder than this one reads."""
+
+
+class NoReconstructionError(RunFolderError):
+    """The run folder has no reconstruction (no ``reconstruction/models.json``)."""
+
+
+class ReconstructionFormatVersionError(RunFolderError):
+    """``reconstruction/models.json`` was written by another format version than this one reads."""
 
 
 class ReconstructionError(GuardrailError):

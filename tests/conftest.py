@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from guardrail_core.drive import Drive, load_drive
+from guardrail_core.formats.drive import Drive, load_drive
 from guardrail_core.synth.scene import load_scene_spec
 from guardrail_core.synth.simulate import SimulationOptions, simulate_drive
 
@@ -36,8 +36,8 @@ def drive(drive_path: Path) -> Drive:
 def model_path(drive_path: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A fast-mode classifier trained on the test drive's truth."""
     from guardrail_core.extract.classify import ClassifierParams
-    from guardrail_core.extract.model_store import save_model
-    from guardrail_core.training import train_from_drives
+    from guardrail_core.extract.model_folder import save_model
+    from guardrail_core.extract.training import train_from_drives
 
     out = tmp_path_factory.mktemp("models") / "fast"
     save_model(train_from_drives([drive_path], params=ClassifierParams(mode="fast")), out)
@@ -47,8 +47,8 @@ def model_path(drive_path: Path, tmp_path_factory: pytest.TempPathFactory) -> Pa
 @pytest.fixture(scope="session")
 def run_path(drive: Drive, model_path: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The test drive processed with :func:`model_path`."""
-    from guardrail_core.extract.model_store import load_model
-    from guardrail_core.pipeline import process_drive
+    from guardrail_core.extract.model_folder import load_model
+    from guardrail_core.process import process_drive
 
     out = tmp_path_factory.mktemp("runs") / "run"
     process_drive(drive, load_model(model_path), out)

@@ -14,7 +14,7 @@ from app.jobs import JobRunner
 from app.main import create_app
 from app.session import ReviewSession
 from guardrail_core.errors import InvalidOptionError
-from guardrail_core.run_folder import load_run
+from guardrail_core.formats.run_folder import load_run
 from tests.app_fixtures import copy_run, new_session
 
 
@@ -42,7 +42,7 @@ def test_info_describes_the_run(client: TestClient, session: ReviewSession) -> N
     info = client.get("/api/info").json()
     assert info["n_segments"] == len(session.run)
     assert info["n_points"] == len(session.drive.points)
-    assert info["model"]["version"] == session.run.info["model"]["version"]
+    assert info["model"]["version"] == session.run.info.model.version
     assert info["token_required"] is False
 
 
@@ -227,7 +227,7 @@ def test_fine_tune_then_activate(client: TestClient, session: ReviewSession) -> 
     answer = client.post(f"/api/models/{result['version']}/activate").json()
     assert answer["active"] == result["version"]
     run = load_run(session.run.root)
-    assert run.info["model"]["version"] == result["version"]
+    assert run.info.model.version == result["version"]
     assert client.get("/api/info").json()["model"]["version"] == result["version"]
     # Operator labels outlive the model change.
     rows = client.get("/api/segments", params={"reviewed": True, "limit": 100}).json()["items"]
@@ -252,8 +252,10 @@ def test_reconstruction_is_redone_with_new_parameters(client: TestClient, sessio
     job_id = client.post("/api/reconstruction/apply", json={"params": params}).json()["job"]
     job = client.jobs.wait(job_id, timeout=300)  # type: ignore[attr-defined]
     assert job.status == "done", job.error
-    saved = json.loads((session.run.root / "reconstruction" / "models.json").read_text())
+    saved = json.loads(session.folder.reconstruction.models_file.read_text())
     assert saved["params"]["pipes"]["histogram_factor"] == 3.5
+    summary = client.get(f"/api/jobs/{job_id}").json()["result"]["summary"]
+    assert summary["runs"] == len(saved["runs"]) and "models.json" in summary["files"]
     assert client.get("/api/reconstruction").json()["params"]["pipes"]["histogram_factor"] == 3.5
 
 
@@ -261,7 +263,7 @@ def test_guardrail_train_takes_the_store_labels(
     session: ReviewSession, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     from guardrail_core.cli import main
-    from guardrail_core.extract.model_store import load_model
+    from guardrail_core.extract.model_folder import load_model
 
     seg = session.run.segments
     session.relabel(np.flatnonzero(seg["label"])[:3], "other")

@@ -7,10 +7,10 @@ import dataclasses
 import numpy as np
 import pytest
 
-from guardrail_core.camera_model import Camera
 from guardrail_core.classes import TruthClass
-from guardrail_core.geometry import make_transform, rotation_from_euler, transform_points
-from guardrail_core.mesh import box, grid_surface, sphere
+from guardrail_core.geom.frames import make_transform, rotation_from_euler, transform_points
+from guardrail_core.geom.mesh import box, grid_surface, sphere
+from guardrail_core.sensors.camera import Camera
 from guardrail_core.synth.camera_render import Lighting, random_lighting, render_image
 from guardrail_core.synth.camera_rig import default_camera_rig
 from guardrail_core.synth.mesh import MeshBuilder

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from guardrail_core.cli import main
+from tests.file_tree import file_tree
 
 
 def test_evaluate_prints_both_tables(
@@ -97,6 +98,27 @@ def test_train_needs_truth(
     err = capsys.readouterr().err
     assert "MissingDriveFileError" in err and "truth" in err
     assert not model.exists()
+
+
+def test_train_refuses_an_output_holding_its_drive_before_training(
+    drive_path: Path,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    out = tmp_path / "out"
+    copy = out / "drive"
+    shutil.copytree(drive_path, copy)
+    before = file_tree(out)
+
+    def no_training(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the output is checked before training")
+
+    monkeypatch.setattr("guardrail_core.extract.training.train_from_drives", no_training)
+    for target in (out, copy, copy / "truth"):
+        assert main(["train", str(copy), "--out", str(target), "--overwrite", "--quiet"]) == 2
+        assert "InputInsideOutputError" in capsys.readouterr().err
+    assert file_tree(out) == before
 
 
 def test_evaluate_without_a_run_folder_is_a_named_error(

@@ -10,7 +10,6 @@ import laspy
 import numpy as np
 import pytest
 
-from guardrail_core.drive import Drive, load_drive
 from guardrail_core.errors import (
     DriveDimensionError,
     DriveFormatError,
@@ -18,6 +17,7 @@ from guardrail_core.errors import (
     NonFiniteCoordinatesError,
     TimestampMismatchError,
 )
+from guardrail_core.formats.drive import Drive, load_drive
 
 
 @pytest.fixture

@@ -11,14 +11,15 @@ import numpy as np
 import pytest
 
 from guardrail_core.cli import main
-from guardrail_core.drive import Drive
 from guardrail_core.errors import (
     ExportError,
+    InputInsideOutputError,
     MissingDriveFileError,
     OutputExistsError,
+    OutputKindError,
     RunFolderError,
 )
-from guardrail_core.io.las_export import (
+from guardrail_core.export.las import (
     CLASS_GUARDRAIL,
     CLASS_GUARDRAIL_POLE,
     CLASS_ROAD_SURFACE,
@@ -28,9 +29,12 @@ from guardrail_core.io.las_export import (
     export_run_las,
     pole_points,
 )
+from guardrail_core.formats.drive import Drive
+from guardrail_core.formats.reconstruction_folder import RECONSTRUCTION_DIR
+from guardrail_core.formats.run_folder import load_run
 from guardrail_core.reconstruct.model import Pole
-from guardrail_core.reconstruction import RECONSTRUCTION_DIR, load_reconstruction
-from guardrail_core.run_folder import load_run
+from guardrail_core.reconstruct.run_models import load_run_models
+from tests.file_tree import file_tree
 
 
 @pytest.fixture(scope="module")
@@ -127,7 +131,7 @@ def test_every_pole_point_lies_on_a_reconstructed_pole(
     exported: tuple[ExportSummary, laspy.LasData], run_path: Path, drive: Drive
 ) -> None:
     _, las = exported
-    runs, _ = load_reconstruction(run_path)
+    runs = load_run_models(run_path).runs
     poles = [p for r in runs for p in r.poles]
     assert poles
     local = np.column_stack([las.x, las.y, las.z]) - drive.origin
@@ -169,7 +173,7 @@ def test_segment_probability_and_run_dimensions(
     np.testing.assert_array_equal(probability[inside], expected.astype(np.float32))
     assert np.all(probability[~inside] == NO_PROBABILITY)
 
-    runs, _ = load_reconstruction(run_path)
+    runs = load_run_models(run_path).runs
     run_id = np.asarray(las.run_id)
     guardrail = _guardrail(run_path)
     assert np.all(run_id[~guardrail] == -1)
@@ -302,14 +306,29 @@ def test_output_names_that_cannot_be_written_are_refused(
         export_run_las(run_path, tmp_path / "old.laz", drive_dir=drive_path)
     assert (tmp_path / "old.laz").read_bytes() == b"an earlier export"
     (tmp_path / "folder.laz").mkdir()
-    with pytest.raises(ExportError, match="folder"):
-        export_run_las(run_path, tmp_path / "folder.laz", drive_dir=drive_path)
+    with pytest.raises(OutputKindError, match="is a folder"):
+        export_run_las(run_path, tmp_path / "folder.laz", drive_dir=drive_path, overwrite=True)
+
+
+def test_an_output_that_is_an_input_is_refused_and_the_inputs_survive(
+    run_path: Path, drive_path: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     drive = _drive_copy(drive_path, tmp_path / "drive")
     points = drive / json.loads((drive / "drive.json").read_text())["files"]["points"]
-    before = points.read_bytes()
-    with pytest.raises(ExportError, match="own point file"):
-        export_run_las(run_path, points, drive_dir=drive, overwrite=True)
-    assert points.read_bytes() == before
+    run = tmp_path / "run"
+    shutil.copytree(run_path, run)
+    (run / "crops" / "old.laz").write_bytes(b"not the run's, but in its crops folder")
+    (tmp_path / "alias").symlink_to(drive)
+    before = file_tree(tmp_path)
+    for out in (points, tmp_path / "alias" / points.name):
+        with pytest.raises(InputInsideOutputError, match="is the input"):
+            export_run_las(run, out, drive_dir=drive, overwrite=True)
+    with pytest.raises(InputInsideOutputError, match="inside the input folder"):
+        export_run_las(run, run / "crops" / "old.laz", drive_dir=drive, overwrite=True)
+    command = ["export", str(run), "--las", str(points), "--drive", str(drive), "--overwrite"]
+    assert main(command) == 2
+    assert "InputInsideOutputError" in capsys.readouterr().err
+    assert file_tree(tmp_path) == before
 
 
 def test_a_failed_write_leaves_nothing_and_keeps_the_old_file(

@@ -3,22 +3,25 @@ error) and on the real scans of ../shared/realdata (rings, lattice, projection i
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from guardrail_core.cli import main
-from guardrail_core.drive import load_drive
 from guardrail_core.errors import (
     FrameRangeError,
+    InputInsideOutputError,
     MissingCalibrationError,
     MissingSourceFileError,
     SourceFormatError,
 )
 from guardrail_core.extract.lattice import build_lattice
+from guardrail_core.formats.drive import load_drive
 from guardrail_core.importers.kitti import import_kitti, parse_frames, recover_rings
-from guardrail_core.scanner_model import MULTIBEAM
+from guardrail_core.sensors.scanner import MULTIBEAM
+from tests.file_tree import file_tree
 from tests.kitti_data import KITTI_RAW, KITTI_SEQ01, require_kitti
 
 IDENTITY_3X4 = " ".join(["1", "0", "0", "0", "0", "1", "0", "0", "0", "0", "1", "0"])
@@ -161,6 +164,46 @@ def test_cli_imports(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None
     assert main(["import", "kitti", str(seq), "--frames", "0-1", "--out", str(out), "--quiet"]) == 0
     assert "imported 2 frames (3,200 points, 8 rings, 0 images)" in capsys.readouterr().out
     assert len(load_drive(out).points) == 3200
+
+
+def test_a_sequence_inside_the_output_is_refused_and_survives(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The data loss of issue 19: with SEQ inside OUT, `--overwrite` used to delete SEQ."""
+    out = tmp_path / "out"
+    seq = _sequence(out / "seq")
+    (out / "notes.txt").write_text("an earlier drive's notes")
+    before = file_tree(out)
+    command = ["import", "kitti", str(seq), "--frames", "1", "--out", str(out), "--overwrite"]
+    assert main([*command, "--quiet"]) == 2
+    assert "InputInsideOutputError" in capsys.readouterr().err
+    with pytest.raises(InputInsideOutputError, match="would delete the input"):
+        import_kitti(seq, out, frames=[1], overwrite=True)
+    with pytest.raises(InputInsideOutputError, match="is the input"):
+        import_kitti(seq, seq / "velodyne", frames=[1], overwrite=True)
+    assert file_tree(out) == before  # byte for byte, and no staging folder
+    # A drive beside the sequence's files is no part of it: written, and replaced again.
+    import_kitti(seq, seq / "drive", frames=[1])
+    import_kitti(seq, seq / "drive", frames=[1, 2], overwrite=True)
+    assert load_drive(seq / "drive").source["frames"] == [1, 2]
+    assert {k: v for k, v in file_tree(out).items() if "/drive" not in k} == before
+
+
+def test_a_real_sequence_inside_the_output_survives(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`guardrail import kitti SEQ --frames 280 --out OUT --overwrite` with SEQ inside OUT."""
+    require_kitti(KITTI_SEQ01)
+    out = tmp_path / "out"
+    seq = out / "01"
+    (seq / "velodyne").mkdir(parents=True)
+    for name in ("calib.txt", "poses.txt", "times.txt", "velodyne/000280.bin"):
+        shutil.copyfile(KITTI_SEQ01 / name, seq / name)
+    before = file_tree(out)
+    command = ["import", "kitti", str(seq), "--frames", "280", "--out", str(out), "--overwrite"]
+    assert main([*command, "--quiet"]) == 2
+    assert "InputInsideOutputError" in capsys.readouterr().err
+    assert file_tree(out) == before
 
 
 # ------------------------------------------------------------------------- real KITTI scans

@@ -8,7 +8,7 @@ import csv
 import filecmp
 import json
 import shutil
-from dataclasses import dataclass
+from dataclasses import astuple, dataclass
 from pathlib import Path
 
 import cv2
@@ -18,8 +18,8 @@ import pytest
 from laspy.vlrs.known import GeoKeyDirectoryVlr, WktCoordinateSystemVlr
 
 from guardrail_core.cli import main
-from guardrail_core.drive import TRAJECTORY_COLUMNS, Drive, load_drive
 from guardrail_core.errors import (
+    InputInsideOutputError,
     InvalidOptionError,
     MissingCalibrationError,
     MissingGpsTimeError,
@@ -28,8 +28,10 @@ from guardrail_core.errors import (
     SourceFormatError,
     TrajectoryCoverageError,
 )
+from guardrail_core.formats.drive import TRAJECTORY_COLUMNS, Drive, load_drive
 from guardrail_core.importers.calibration import read_calibration
 from guardrail_core.importers.las_delivery import LasImport, import_las_delivery
+from tests.file_tree import file_tree
 
 WKT_6677 = (
     'PROJCS["JGD2011 / Japan Plane Rectangular CS IX",GEOGCS["JGD2011",DATUM["Japanese_Geodetic_'
@@ -259,8 +261,8 @@ def test_cli_imports_a_laz_with_wkt_reordered_trajectory_in_degrees(
             "--trajectory", str(trajectory), "--trajectory-degrees",
             "--images", str(small.images),
             "--calibration", str(drive.root / "cameras.json"),
-            "--rotations-per-second", str(scanner.rotations_per_second),
-            "--measurements-per-second", str(scanner.measurements_per_second),
+            "--rotations-per-second", str(scanner.rotation_rate_hz),
+            "--measurements-per-second", str(scanner.measurement_rate_hz),
             f"--scanner-mount={mount}",
             "--reference-height", "1.7",
             "--out", str(out), "--quiet",
@@ -268,7 +270,7 @@ def test_cli_imports_a_laz_with_wkt_reordered_trajectory_in_degrees(
     )  # fmt: skip
     assert code == 0
     printed = capsys.readouterr().out
-    assert "EPSG:6677, from the LAS file" in printed and f"t0 {scanner.t0:.6f}" in printed
+    assert "EPSG:6677, from the LAS file" in printed and f"t0 {scanner.t0_s:.6f}" in printed
     imported = load_drive(out)
     assert imported.crs == "EPSG:6677"
     assert imported.trajectory.reference_height_m == 1.7
@@ -400,7 +402,7 @@ def test_degrees_without_the_flag(drive: Drive, small: Delivery, tmp_path: Path)
 
 
 def test_scanner_rates_are_required(small: Delivery, tmp_path: Path) -> None:
-    with pytest.raises(InvalidOptionError, match="rotations_per_second"):
+    with pytest.raises(InvalidOptionError, match="rotation_rate_hz"):
         run_import(small, tmp_path / "drive", scanner={"measurements_per_second": 3e5})
     with pytest.raises(InvalidOptionError, match="epoch must lie at or before the first point"):
         run_import(
@@ -429,11 +431,35 @@ def test_an_existing_output_is_kept_without_overwrite(small: Delivery, tmp_path:
     with pytest.raises(MissingSourceFileError):  # a failed import keeps the old output too
         run_import(small, out, overwrite=True, trajectory=tmp_path / "missing.csv")
     assert (out / "keep.txt").read_text() == "mine"
-    with pytest.raises(InvalidOptionError, match="would delete the input"):
-        run_import(small, small.folder, overwrite=True)
-    assert small.points.is_file()
     run_import(small, out, overwrite=True, images_csv=None, calibration=None)
     assert not (out / "keep.txt").exists() and load_drive(out).images == []
+
+
+def test_an_output_holding_an_input_is_refused_and_every_input_survives(
+    small: Delivery, tmp_path: Path
+) -> None:
+    out = tmp_path / "out"
+    copy = out / "delivery"
+    shutil.copytree(small.folder, copy)
+    moved = Delivery(
+        copy,
+        *(copy / p.relative_to(small.folder) for p in astuple(small)[1:6]),
+        small.keep,
+    )
+    before = file_tree(out)
+    with pytest.raises(InputInsideOutputError, match="holds the input"):
+        run_import(moved, out, overwrite=True)
+    with pytest.raises(InputInsideOutputError, match="holds the input"):
+        run_import(moved, copy, overwrite=True)
+    with pytest.raises(InputInsideOutputError, match="is the input"):
+        run_import(moved, moved.calibration, overwrite=True)
+    # Only the listed images lie in photos/: refused once the list is read, before any writing.
+    with pytest.raises(InputInsideOutputError, match="holds the input .*photos"):
+        run_import(moved, copy / "photos", overwrite=True)
+    assert file_tree(out) == before
+    args = ["import", "las", str(moved.points), "--trajectory", str(moved.trajectory)]
+    assert main([*args, "--scanner", str(moved.scanner), "--out", str(out), "--overwrite"]) == 2
+    assert file_tree(out) == before
 
 
 # ------------------------------------------------------------------------------- calibration

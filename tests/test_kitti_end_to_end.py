@@ -18,12 +18,12 @@ import cv2
 import numpy as np
 import pytest
 
-from guardrail_core.drive import Drive, load_drive
 from guardrail_core.extract.crops import CROP_OK, CropParams, crop_window, cut_crop
-from guardrail_core.extract.model_store import DEFAULT_MODEL_DIR, load_model
+from guardrail_core.extract.model_folder import DEFAULT_MODEL_DIR, load_model
+from guardrail_core.formats.drive import Drive, load_drive
+from guardrail_core.formats.run_folder import Run, crop_name, load_run
 from guardrail_core.importers.kitti import import_kitti
-from guardrail_core.pipeline import process_drive
-from guardrail_core.run_folder import Run, crop_name, load_run
+from guardrail_core.process import process_drive
 from tests.kitti_data import KITTI_RAW, KITTI_SEQ01, require_kitti
 
 ROAD_Z_M = -1.72

@@ -8,14 +8,13 @@ import subprocess
 import sys
 import textwrap
 import threading
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from guardrail_core.errors import InvalidOptionError, LabelStoreError
-from guardrail_core.label_store import (
+from guardrail_core.formats.label_store import (
     LABEL_GUARDRAIL,
     LABEL_OTHER,
     SCHEMA_VERSION,
@@ -186,7 +185,7 @@ def test_committed_labels_survive_a_killed_process(tmp_path: Path) -> None:
         f"""
         import os, sys
         import numpy as np
-        from guardrail_core.label_store import LabelStore
+        from guardrail_core.formats.label_store import LabelStore
         store = LabelStore({str(path)!r}, n_points={N})
         store.set_labels(np.arange(100, 200), 1, who="ann")
         store.set_labels([150, 300], 0, who="ann")
@@ -253,7 +252,7 @@ def test_bad_input_raises_and_changes_nothing(store: LabelStore) -> None:
         lambda: store.set_labels([1], 2, who="ann"),
         lambda: store.set_labels([1], -1, who="ann"),
         lambda: store.set_labels([1], True, who="ann"),
-        lambda: store.set_labels([1.5], LABEL_OTHER, who="ann"),
+        lambda: store.set_labels([1.5], LABEL_OTHER, who="ann"),  # type: ignore[list-item]
         lambda: store.set_labels(np.array([[1]]), LABEL_OTHER, who="ann"),
         lambda: store.set_labels([], LABEL_OTHER, who="ann"),
         lambda: store.set_labels([True], LABEL_OTHER, who="ann"),
@@ -324,19 +323,6 @@ def test_closed_store_refuses_calls(tmp_path: Path) -> None:
         store.point_labels()
     with pytest.raises(LabelStoreError, match="closed"):
         store.set_labels([1], LABEL_OTHER, who="ann")
-
-
-def test_set_labels_is_fast(store: LabelStore) -> None:
-    """The review app labels a few segments per click: ~300 points well under 10 ms."""
-    rng = np.random.default_rng(0)
-    seconds = []
-    for i in range(21):
-        points = rng.integers(0, N, 300)
-        clock = time.perf_counter()
-        store.set_labels(points, i % 2, who="ann")
-        seconds.append(time.perf_counter() - clock)
-    # Generous against shared CI machines; about 1 ms measured (see the module docstring).
-    assert np.median(seconds) < 0.02
 
 
 def test_store_file_is_wal_with_full_sync(store: LabelStore) -> None:

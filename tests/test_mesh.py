@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from guardrail_core.mesh import (
+from guardrail_core.geom.mesh import (
     dome,
     outward,
     plate,

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from guardrail_core.errors import ReconstructionError
+from guardrail_core.params import ParameterError
 from guardrail_core.reconstruct.beams import BeamParams, reconstruct_beam, unit_type
 from guardrail_core.synth.designs import thrie_beam_section, w_beam_section
 
@@ -119,18 +120,23 @@ def test_bad_unit_raises(length, pole_radius):
 @pytest.mark.parametrize(
     "kwargs",
     [
-        {"slice_interval": -0.01},
-        {"cell": 0.0},
+        {"slice_interval_m": -0.01},
+        {"cell_m": 0.0},
         {"filled_share": 1.5},
         {"taubin_mu": 0.2},
         {"min_points": 0},
         {"min_x_spread": 1.0},
-        {"max_band_gap": -0.1},
+        {"max_band_gap_m": -0.1},
     ],
 )
 def test_params_out_of_range_raise(kwargs):
-    with pytest.raises(ReconstructionError):
+    with pytest.raises(ParameterError, match=f"BeamParams.*{next(iter(kwargs))}"):
         BeamParams(**kwargs)
+
+
+def test_old_names_load():
+    old = BeamParams.from_json({"slice_interval": 0.02, "crest_depth": 0.02, "cell": 0.03})
+    assert old == BeamParams(slice_interval_m=0.02, crest_depth_m=0.02, cell_m=0.03)
 
 
 def test_clutter_at_one_x_or_far_below_is_not_the_beam():
@@ -147,7 +153,7 @@ def test_clutter_at_one_x_or_far_below_is_not_the_beam():
     rec = reconstruct_beam(np.vstack([pts, column, ground]), LENGTH, POST_R)
     assert abs(rec.section[:, 1].min() - truth[:, 1].min()) < 0.01
     assert _hausdorff(rec.section, truth) < 0.006
-    naive = BeamParams(min_x_spread=0.0, max_band_gap=1.0)
+    naive = BeamParams(min_x_spread=0.0, max_band_gap_m=1.0)
     loose = reconstruct_beam(np.vstack([pts, column, ground]), LENGTH, POST_R, naive)
     assert loose.section[:, 1].min() < truth[:, 1].min() - 0.1
 

@@ -6,7 +6,11 @@ import numpy as np
 import pytest
 
 from guardrail_core.errors import ReconstructionError
+from guardrail_core.params import ParameterError
 from guardrail_core.reconstruct.pipes import PipeParams, reconstruct_pipes
+from guardrail_core.reconstruct.pipes.crossings import uncross
+from guardrail_core.reconstruct.pipes.slices import slice_labels
+from guardrail_core.reconstruct.pipes.tracking import Centre, Track
 
 LENGTH = 2.0
 POLE_R = 0.0305
@@ -206,32 +210,69 @@ def test_bad_unit_raises(length, pole_radius):
 
 
 @pytest.mark.parametrize(
-    "kwargs",
+    ("kwargs", "named"),
     [
-        {"slice_interval": -0.03},
-        {"histogram_bin": 0.0},
-        {"radius_share": 1.5},
-        {"horizontal_angle": 95.0},
-        {"taubin_mu": 0.1},
-        {"join_distance": float("nan")},
-        {"min_points": 0},
+        ({"slice_interval_m": -0.03}, "PipeParams.slice_interval_m"),
+        ({"histogram_bin_m": 0.0}, "PipeParams.histogram_bin_m"),
+        ({"radius_share": 1.5}, "PipeParams.radius_share"),
+        ({"horizontal_angle_deg": 95.0}, "PipeParams.horizontal_angle_deg"),
+        ({"taubin_mu": -0.4}, "taubin_mu must be below -taubin_lambda"),
+        ({"join_distance_m": float("nan")}, "PipeParams.join_distance_m"),
+        ({"min_points": 0}, "PipeParams.min_points"),
+        ({"slice_spread": 1.0}, "PipeParams.slice_spread"),
+        ({"line_searches": 2.5}, "PipeParams.line_searches"),
     ],
 )
-def test_params_out_of_range_raise(kwargs):
-    with pytest.raises(ReconstructionError):
+def test_params_out_of_range_raise(kwargs, named):
+    with pytest.raises(ParameterError, match=named):
         PipeParams(**kwargs)
+
+
+def test_params_saved_under_their_old_names_load():
+    old = {"slice_interval": 0.02, "vertical_angle": 5.0, "link_max_slope": 2.0}
+    params = PipeParams.from_json(old)
+    assert (params.slice_interval_m, params.vertical_angle_deg, params.link_max_slope) == (
+        0.02,
+        5.0,
+        2.0,
+    )
+    assert PipeParams.from_json(PipeParams().to_json()) == PipeParams()
+    assert set(PipeParams.renamed.values()) <= {spec.name for spec in PipeParams.specs()}
+
+
+def test_every_param_is_named_after_its_unit_and_used():
+    # A unit suffix exactly where the unit is a length or an angle; every threshold read by
+    # the reconstruction (none left over from an earlier version).
+    source = "".join(
+        path.read_text()
+        for path in (Path(__file__).parents[1] / "guardrail_core/reconstruct/pipes").glob("*.py")
+        if path.name != "params.py"
+    )
+    for spec in PipeParams.specs():
+        suffix = {"m": "_m", "deg": "_deg", "": ""}[spec.unit]
+        assert spec.name.endswith(suffix) and (suffix or not spec.name.endswith(("_m", "_deg")))
+        assert f"p.{spec.name}" in source, spec.name
+        assert spec.doc, spec.name
+
+
+def test_the_line_search_randomness_is_passed_in(fence):
+    # The default is seed 0; the same seed or generator state gives the same pipes.
+    pts, _ = fence
+    default = reconstruct_pipes(pts, LENGTH, POLE_R)
+    for rng in (0, np.random.default_rng(0)):
+        again = reconstruct_pipes(pts, LENGTH, POLE_R, rng=rng)
+        assert len(again.pipes) == len(default.pipes)
+        for a, b in zip(again.pipes, default.pipes, strict=True):
+            assert np.array_equal(a.axis, b.axis) and a.radius == b.radius
+    other = reconstruct_pipes(pts, LENGTH, POLE_R, rng=12345)
+    assert sorted(p.kind for p in other.pipes) == sorted(p.kind for p in default.pipes)
 
 
 def test_a_crossing_where_one_chain_bounced_off_the_other_is_repaired():
     # An X of two diagonals whose chains of slice centres went wrong at the crossing: one runs
     # up and back down (a Λ), the other two halves stop and start near its apex.
-    from guardrail_core.reconstruct.pipes import _Track, _uncross
-
     def track(xs, line):
-        t = _Track(0, xs[0], line(xs[0]), 0, 10.0)
-        for k, x in enumerate(xs[1:], start=1):
-            t.add(k, x, line(x), k, 10.0, False)
-        return t
+        return Track([Centre(x, line(x), 10.0, k) for k, x in enumerate(xs)])
 
     def up(x):
         return 0.2 + 0.3 * x
@@ -239,15 +280,16 @@ def test_a_crossing_where_one_chain_bounced_off_the_other_is_repaired():
     def down(x):
         return 0.8 - 0.3 * x
 
-    step = PipeParams().slice_interval
+    step = PipeParams().slice_interval_m
     bounce = track(np.arange(0.05, 1.9, step), lambda x: up(x) if x <= 1.0 else down(x))
     first_down = track(np.arange(0.05, 0.9, step), down)
     second_up = track(np.arange(1.12, 1.9, step), up)
-    tracks = _uncross([bounce, first_down, second_up], PipeParams())
-    assert len(tracks) == 2
+    tracks = uncross([bounce, first_down, second_up], PipeParams())
+    assert tracks == [bounce, first_down]
     for t, line in ((first_down, down), (bounce, up)):  # each one straight line, end to end
-        assert t.x[0] < 0.1 and t.x[-1] > 1.8
-        x, error = np.array(t.x), np.abs(np.array(t.y) - [line(x) for x in t.x])
+        x, y = t.xy().T
+        assert x[0] < 0.1 and x[-1] > 1.8 and np.all(np.diff(x) > 0)
+        error = np.abs(y - line(x))
         assert error[np.abs(x - 1.0) > 0.05].max() < 1e-9  # the apex centre is on both
         assert error.max() < 0.03
 
@@ -338,19 +380,17 @@ def test_diagonals_that_ran_on_along_the_rails_are_cut_back_not_dropped():
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_slice_components_are_those_of_each_slices_delaunay_wireframe(seed):
     # §4.3: the components of each 30 mm slice's Delaunay wireframe with edges longer than
-    # max_edge cut, which the k-d tree's pairs within max_edge give too; points on a line
+    # max_edge_m cut, which the k-d tree's pairs within max_edge_m give too; points on a line
     # (one slice of a scan line) included.
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
     from scipy.spatial import Delaunay
 
-    from guardrail_core.reconstruct.pipes import _slice_components
-
     rng = np.random.default_rng(seed)
     p = PipeParams()
     line = np.column_stack([np.full(30, 0.52), np.linspace(0.1, 0.9, 30)])
     xy = np.vstack([rng.uniform([0.05, 0.0], [1.95, 1.0], (3000, 2)), line])
-    s, labels = _slice_components(xy, 0.05, p)
+    s, labels = slice_labels(xy, 0.05, p)
     rows, cols = [], []
     for k in np.unique(s):
         idx = np.flatnonzero(s == k)
@@ -358,7 +398,7 @@ def test_slice_components_are_those_of_each_slices_delaunay_wireframe(seed):
         rows.append(idx[tri].ravel())
         cols.append(idx[np.roll(tri, 1, axis=1)].ravel())
     a, b = np.concatenate(rows), np.concatenate(cols)
-    cut = np.linalg.norm(xy[a] - xy[b], axis=1) <= p.max_edge
+    cut = np.linalg.norm(xy[a] - xy[b], axis=1) <= p.max_edge_m
     graph = coo_matrix((np.ones(int(cut.sum())), (a[cut], b[cut])), shape=(len(xy),) * 2)
     _, truth = connected_components(graph, directed=False)
     pairs = set(zip(labels.tolist(), truth.tolist(), strict=True))

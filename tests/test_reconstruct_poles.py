@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from guardrail_core.errors import ReconstructionError
+from guardrail_core.params import ParameterError
 from guardrail_core.reconstruct.poles import PoleParams, detect_poles, fit_circles
 from tests.reconstruct_fixtures import make_run
 
@@ -119,8 +120,10 @@ def test_bad_input_raises(xyz, ground, match):
 
 
 def test_bad_params_raise():
-    with pytest.raises(ReconstructionError, match="section_step_m"):
-        detect_poles(np.zeros((10, 3)), None, PoleParams(section_step_m=0.0))
+    with pytest.raises(ParameterError, match=r"PoleParams\.section_step_m"):
+        PoleParams(section_step_m=0.0)
+    with pytest.raises(ParameterError, match="min_radius_m .* must not exceed max_radius_m"):
+        PoleParams(min_radius_m=0.5, max_radius_m=0.01)
 
 
 def _front_cylinder(rng, base, toward_road, radius, height, n=120, noise=0.003):

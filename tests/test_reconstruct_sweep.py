@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from guardrail_core.errors import InvalidOptionError, ReconstructionError
+from guardrail_core.errors import ReconstructionError
+from guardrail_core.params import ParameterError
 from guardrail_core.reconstruct.model import Pipe, UnitModel
 from guardrail_core.reconstruct.sweep import SweepParams, pipe_mesh, unit_mesh
 
@@ -75,19 +76,19 @@ def test_capped_pipe_volume():
 
 def test_beam_plate_spans_the_unit_and_follows_the_section():
     model = _beam_model()
-    params = SweepParams(beam_thickness=0.004)
+    params = SweepParams(beam_thickness_m=0.004)
     mesh = unit_mesh(model, params)
     assert mesh.is_watertight and mesh.is_winding_consistent
     np.testing.assert_allclose(mesh.bounds[:, 0], [0.0, L], atol=1e-12)
     arc = np.linalg.norm(np.diff(model.section, axis=0), axis=1).sum()
-    assert mesh.volume == pytest.approx(params.beam_thickness * arc * L, rel=0.02)
+    assert mesh.volume == pytest.approx(params.beam_thickness_m * arc * L, rel=0.02)
     # Every vertex is within half the thickness of the section curve (z, y).
     zy = np.asarray(mesh.vertices)[:, [2, 1]]
     dense = np.array(
         [np.interp(np.linspace(0, 1, 2000), np.linspace(0, 1, 25), c) for c in model.section.T]
     ).T
     nearest = np.min(np.linalg.norm(zy[:, None, :] - dense[None], axis=2), axis=1)
-    assert nearest.max() < params.beam_thickness / 2 + 1e-3
+    assert nearest.max() < params.beam_thickness_m / 2 + 1e-3
 
 
 def test_models_without_geometry_give_empty_meshes():
@@ -113,11 +114,21 @@ def test_bad_models_raise(model):
 
 
 @pytest.mark.parametrize(
-    "kwargs", [{"tube_sections": 2}, {"beam_thickness": 0.0}, {"min_mitre_cos": 0.0}]
+    "kwargs", [{"tube_sections": 2}, {"beam_thickness_m": 0.0}, {"min_mitre_cos": 0.0}]
 )
 def test_bad_params_raise(kwargs):
-    with pytest.raises(InvalidOptionError):
+    with pytest.raises(ParameterError, match=f"SweepParams.*{next(iter(kwargs))}"):
         SweepParams(**kwargs)
+
+
+@pytest.mark.parametrize("color", [(1, 2, 3), (0, 0, 0, 256), (0.5, 0, 0, 255)])
+def test_bad_colours_raise(color):
+    with pytest.raises(ParameterError, match="rail_color"):
+        SweepParams(rail_color=color)
+
+
+def test_old_names_load():
+    assert SweepParams.from_json({"beam_thickness": 0.004}) == SweepParams(beam_thickness_m=0.004)
 
 
 def test_mesh_is_a_trimesh_in_float64():

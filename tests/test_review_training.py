@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import shutil
-import time
 from pathlib import Path
 
 import numpy as np
@@ -14,10 +14,13 @@ import pytest
 from guardrail_core.errors import InvalidOptionError, TrainingDataError
 from guardrail_core.extract.classify import EMBEDDING_DIM, ClassifierParams, held_out_mask
 from guardrail_core.extract.crops import CROP_OK
-from guardrail_core.extract.model_store import load_model
+from guardrail_core.extract.model_folder import load_model
 from guardrail_core.extract.segment_head import SegmentHeadParams
-from guardrail_core.label_store import LABEL_GUARDRAIL, LABEL_OTHER, UNLABELLED
-from guardrail_core.review_training import (
+from guardrail_core.extract.training import HOLD_OUT_BLOCK_SLICES, TrainingSet, train_on_set
+from guardrail_core.formats.label_store import LABEL_GUARDRAIL, LABEL_OTHER, UNLABELLED
+from guardrail_core.formats.run_folder import SEGMENT_FIELDS, Run, load_run
+from guardrail_core.formats.run_info import ModelRef
+from guardrail_core.review.training import (
     AGAINST_EFFECTIVE,
     AGAINST_OPERATOR,
     effective_labels,
@@ -28,8 +31,6 @@ from guardrail_core.review_training import (
     training_set_from_run,
     write_predictions,
 )
-from guardrail_core.run_folder import SEGMENT_FIELDS, Run, load_run
-from guardrail_core.training import HOLD_OUT_BLOCK_SLICES, TrainingSet, train_on_set
 
 
 @pytest.fixture
@@ -167,11 +168,9 @@ def test_train_from_run_compares_on_the_same_held_out_segments(run_path: Path) -
     run = load_run(run_path)
     labels, _ = _flip_some(run)
     reports: list[tuple[float, str]] = []
-    clock = time.perf_counter()
+    # Its speed (target <= 20 s) is measured by benchmarks/bench_app.py, not timed here.
     trained = train_from_run(run, labels, progress_fn=lambda f, m: reports.append((f, m)))
-    seconds = time.perf_counter() - clock
-    assert seconds < 20  # the target for fast retraining (2 shared cores)
-    assert 0 < trained.seconds <= seconds
+    assert trained.seconds > 0
 
     new, current = trained.metrics_new, trained.metrics_current
     assert new is not None and current is not None
@@ -185,7 +184,7 @@ def test_train_from_run_compares_on_the_same_held_out_segments(run_path: Path) -
     assert new["note"] == current["note"] and "favours the current model" in new["note"]
     # The current model's figures, recomputed here from the run and the same held-out segments.
     effective, _ = effective_labels(run, labels)
-    called = np.nan_to_num(run.segments["probability"], nan=0.0) >= run.info["model"]["threshold"]
+    called = np.nan_to_num(run.segments["probability"], nan=0.0) >= run.info.model.threshold
     truth, called = effective[held], called[held]
     assert current["guardrail"]["n"] == int(truth.sum())
     assert current["accuracy"] == pytest.approx(np.mean(truth == called))
@@ -224,7 +223,7 @@ def test_train_from_run_compares_against_the_operators_labels(run_path: Path) ->
         assert metrics["guardrail"]["n"] == int(truth.sum())
         assert metrics["other"]["n"] == int((~truth).sum())
     # The run's model, by hand: its stored probability >= its threshold, on exactly those.
-    threshold = run.info["model"]["threshold"]
+    threshold = run.info.model.threshold
     called = np.nan_to_num(run.segments["probability"], nan=0.0) >= threshold
     assert current["threshold"] == threshold
     assert current["accuracy"] == pytest.approx(np.mean(truth == called[measured]))
@@ -244,7 +243,7 @@ def test_train_from_run_falls_back_to_the_effective_labels(run_path: Path) -> No
     new, current = trained.metrics_new, trained.metrics_current
     assert new is not None and current is not None
     effective, _ = effective_labels(run, labels)
-    called = np.nan_to_num(run.segments["probability"], nan=0.0) >= run.info["model"]["threshold"]
+    called = np.nan_to_num(run.segments["probability"], nan=0.0) >= run.info.model.threshold
     for metrics in (new, current):
         assert metrics["against"] == AGAINST_EFFECTIVE
         assert f"only {n_reviewed} of the {int(held.sum())}" in metrics["note"]
@@ -331,7 +330,7 @@ def test_predict_run_with_the_runs_model_reproduces_the_run(
 ) -> None:
     run = load_run(run_path)
     model = load_model(model_path)
-    assert model.version == run.info["model"]["version"]
+    assert model.version == run.info.model.version
     predicted = predict_run(run, model)
     for name in ("crop_probability", "probability", "raw_label", "label"):
         assert predicted[name].dtype == np.dtype(SEGMENT_FIELDS[name][0])
@@ -359,21 +358,33 @@ def test_write_predictions_replaces_the_runs_predictions(
     for name in SEGMENT_FIELDS:
         expected = predicted[name] if name in predicted else run.segments[name]
         assert np.array_equal(after.segments[name], expected, equal_nan=name.endswith("ity")), name
-    assert after.info["model"] == {
-        "version": model.version,
-        "mode": "fast",
-        "threshold": model.threshold,
-    }
-    assert after.info["predicted"]["previous_model"] == run.info["model"]
+    assert after.info.model == ModelRef(
+        version=model.version, mode="fast", threshold=model.threshold
+    )
+    assert after.info.predicted is not None
+    assert after.info.predicted.previous_model == run.info.model
     label = predicted["label"]
-    counts = after.info["counts"]
-    assert counts["guardrail_segments"] == int(label.sum())
-    assert counts["guardrail_segments_raw"] == int(predicted["raw_label"].sum())
-    assert counts["guardrail_points"] == int(run.segments["n_points"][label].sum())
-    assert counts["segments"] == run.info["counts"]["segments"]
-    if "reconstruction" in run.info:
-        assert "outdated" in after.info["reconstruction"]
-    assert not list(run_copy.glob(".*.tmp*"))  # no temporary file left
+    counts = after.info.counts
+    assert counts.guardrail_segments == int(label.sum())
+    assert counts.guardrail_segments_raw == int(predicted["raw_label"].sum())
+    assert counts.guardrail_points == int(run.segments["n_points"][label].sum())
+    # Every other count, the drive, the parameters and the images are kept.
+    assert (
+        dataclasses.replace(
+            counts,
+            guardrail_segments=run.info.counts.guardrail_segments,
+            guardrail_segments_raw=run.info.counts.guardrail_segments_raw,
+            guardrail_points=run.info.counts.guardrail_points,
+        )
+        == run.info.counts
+    )
+    assert (
+        dataclasses.replace(
+            after.info, model=run.info.model, counts=run.info.counts, predicted=None
+        )
+        == run.info
+    )
+    assert not list(run_copy.glob(".*"))  # no temporary file left
 
     with (run_copy / "segments.csv").open() as f:
         rows = list(csv.DictReader(f))
@@ -384,9 +395,9 @@ def test_write_predictions_replaces_the_runs_predictions(
         assert (row["probability"] == "") == bool(np.isnan(p))
         if row["probability"]:
             assert float(row["probability"]) == pytest.approx(float(p), abs=5e-5)
-    assert json.loads((run_copy / "run.json").read_text()) == after.info
+    assert json.loads((run_copy / "run.json").read_text()) == after.info.to_json()
     # The original run (the session fixture) is untouched.
-    assert load_run(run_path).info["model"] == run.info["model"]
+    assert load_run(run_path).info.model == run.info.model
 
     with pytest.raises(InvalidOptionError):
         write_predictions(run_copy, {**predicted, "label": predicted["label"][:-1]}, model)

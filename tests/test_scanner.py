@@ -6,12 +6,13 @@ import numpy as np
 import pytest
 
 from guardrail_core.errors import DriveFormatError
-from guardrail_core.mesh import box
-from guardrail_core.scanner_model import ScannerParams, scanner_mounting
+from guardrail_core.geom.mesh import box
+from guardrail_core.params import ParameterError
+from guardrail_core.sensors.scanner import ScannerParams, scanner_mounting
+from guardrail_core.sensors.trajectory import Trajectory
 from guardrail_core.synth.mesh import MeshBuilder
 from guardrail_core.synth.raycast import SceneRaycaster
 from guardrail_core.synth.scanner import scan
-from guardrail_core.trajectory import Trajectory
 
 WALL_Y = 4.0  # a wall 4 m to the vehicle's left, along its path
 
@@ -32,7 +33,7 @@ def _straight_drive(seconds: float = 0.2, speed: float = 10.0) -> Trajectory:
 
 def _scan_lines_slope(pitch_deg: float) -> float:
     """Median d(along)/d(height) of each rotation's points on the wall."""
-    scanner = ScannerParams(t0=1000.0, T_vehicle_scanner=scanner_mounting(pitch_deg=pitch_deg))
+    scanner = ScannerParams(t0_s=1000.0, T_vehicle_scanner=scanner_mounting(pitch_deg=pitch_deg))
     result = scan(_wall_scene(), _straight_drive(), scanner, np.random.default_rng(0))
     on_wall = np.abs(result.xyz[:, 1] - WALL_Y) < 0.05
     slopes = []
@@ -45,9 +46,9 @@ def _scan_lines_slope(pitch_deg: float) -> float:
 
 
 def test_lattice_arithmetic_round_trips() -> None:
-    scanner = ScannerParams(t0=345_600.0)
+    scanner = ScannerParams(t0_s=345_600.0)
     k = np.array([0, 1, 2999, 3000, 123_456_789])
-    t = scanner.t0 + k / scanner.measurements_per_second
+    t = scanner.t0_s + k / scanner.measurement_rate_hz
     rotation, phase = scanner.lattice_from_gps_time(t)
     np.testing.assert_array_equal(rotation, k // 3000)
     np.testing.assert_array_equal(phase, k % 3000)
@@ -55,8 +56,44 @@ def test_lattice_arithmetic_round_trips() -> None:
 
 
 def test_rates_that_make_no_lattice_are_refused() -> None:
+    with pytest.raises(ParameterError, match="whole multiple"):
+        ScannerParams(rotation_rate_hz=100.0, measurement_rate_hz=150_050.0)
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        ({"rotation_rate_hz": 0.0}, "rotation_rate_hz must lie within"),
+        ({"range_noise_m": -0.001}, "range_noise_m must lie within"),
+        ({"min_range_m": 200.0}, "min_range_m .* must lie below max_range_m"),
+        ({"kind": "flash"}, "kind must be one of"),
+        ({"kind": "multibeam"}, "needs rings >= 1"),
+        ({"T_vehicle_scanner": np.eye(3)}, "finite 4x4 matrix"),
+    ],
+)
+def test_scanner_params_out_of_range_are_named(changes: dict, message: str) -> None:
+    with pytest.raises(ParameterError, match=message):
+        ScannerParams(**changes)
+
+
+def test_drive_json_scanner_round_trips_and_reads_the_names_of_format_1_1() -> None:
+    scanner = ScannerParams(t0_s=345_600.0, range_noise_m=0.01)
+    data = scanner.to_json()
+    assert ScannerParams.from_json(data).to_json() == data
+    old = {
+        "rotations_per_second": 100.0,
+        "measurements_per_second": 300_000.0,
+        "t0": 345_600.0,
+        "range_noise_m": 0.01,
+        "min_range_m": 1.5,
+        "max_range_m": 120.0,
+        "T_vehicle_scanner": data["T_vehicle_scanner"],
+    }
+    assert ScannerParams.from_json(old).to_json() == data
     with pytest.raises(DriveFormatError, match="whole multiple"):
-        ScannerParams(rotations_per_second=100.0, measurements_per_second=150_050.0)
+        ScannerParams.from_json(old | {"measurements_per_second": 150_050.0})
+    with pytest.raises(DriveFormatError, match="lacks the key 't0_s'"):
+        ScannerParams.from_json({k: v for k, v in old.items() if k != "t0"})
 
 
 @pytest.mark.parametrize(
@@ -69,7 +106,7 @@ def test_mounting_pitch_sets_the_slope_of_the_scan_lines(pitch_deg: float, slope
 
 
 def test_range_noise_and_one_return_per_pulse() -> None:
-    scanner = ScannerParams(t0=1000.0, range_noise_m=0.005)
+    scanner = ScannerParams(t0_s=1000.0, range_noise_m=0.005)
     result = scan(_wall_scene(), _straight_drive(), scanner, np.random.default_rng(1))
     on_wall = np.abs(result.xyz[:, 1] - WALL_Y) < 0.05
     # Off-plane scatter of wall points: the along-beam noise projected on the wall's normal.
@@ -79,7 +116,7 @@ def test_range_noise_and_one_return_per_pulse() -> None:
 
 
 def test_intensity_follows_reflectivity() -> None:
-    scanner = ScannerParams(t0=1000.0)
+    scanner = ScannerParams(t0_s=1000.0)
     bright = scan(_wall_scene("white"), _straight_drive(), scanner, np.random.default_rng(2))
     dark = scan(_wall_scene("rubber"), _straight_drive(), scanner, np.random.default_rng(2))
     assert np.median(bright.intensity) > 2 * np.median(dark.intensity)

@@ -100,6 +100,8 @@ def _spec() -> dict:
         (lambda s: s["objects"][0].update(at=1000), r"objects\[0\].at"),
         (lambda s: s.update(origin=[1, 2]), "origin"),
         (lambda s: s.update(scanner={"measurements_per_second": 123_457}), "whole multiple"),
+        (lambda s: s.update(scanner={"measurement_rate_hz": 123_457}), "whole multiple"),
+        (lambda s: s.update(scanner={"range_noise_m": -0.01}), "scanner: .*range_noise_m"),
         (lambda s: s.update(scanner={"mounting": {"position_m": [0, 0]}}), "position_m"),
         (
             lambda s: s.update(scanner={"mounting": {"pitch_deg": "steep"}}),

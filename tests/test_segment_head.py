@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from guardrail_core.errors import IncompatibleModelError, InvalidOptionError, ModelFormatError
-from guardrail_core.extract.model_store import load_model
+from guardrail_core.extract.model_folder import load_model
 from guardrail_core.extract.segment_head import (
     SegmentHead,
     SegmentHeadParams,

@@ -3,17 +3,20 @@
 from __future__ import annotations
 
 import filecmp
+import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from guardrail_core.classes import GUARDRAIL_CLASSES, TruthClass
-from guardrail_core.drive import Drive, load_drive
-from guardrail_core.errors import OutputExistsError, SceneSpecError
+from guardrail_core.cli import main
+from guardrail_core.errors import InputInsideOutputError, OutputExistsError, SceneSpecError
+from guardrail_core.formats.drive import Drive, load_drive
 from guardrail_core.synth.raycast import SceneRaycaster
-from guardrail_core.synth.scene import load_scene_spec
+from guardrail_core.synth.scene import SCENES_DIR, load_scene_spec
 from guardrail_core.synth.simulate import rebuild_scene, simulate_drive
+from tests.file_tree import file_tree
 
 from .conftest import SMALL_OPTIONS, TEST_SEED
 
@@ -183,6 +186,22 @@ def test_simulation_refuses_to_overwrite_and_leaves_nothing_on_error(
     with pytest.raises(SceneSpecError, match="no_such_design"):
         simulate_drive(spec, tmp_path / "bad", seed=1, progress=False)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_scene_file_inside_the_output_is_refused_and_survives(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "out"
+    out.mkdir()
+    scene = out / "street.yaml"
+    shutil.copyfile(SCENES_DIR / "test_straight.yaml", scene)
+    before = file_tree(out)
+    with pytest.raises(InputInsideOutputError, match="holds the input"):
+        simulate_drive(load_scene_spec(scene), out, inputs=[scene], overwrite=True, progress=False)
+    assert main(["simulate", str(out), "--scene", str(scene), "--overwrite", "--quiet"]) == 2
+    assert "InputInsideOutputError" in capsys.readouterr().err
+    assert file_tree(out) == before  # the scene byte for byte, and no staging folder
+    assert [p.name for p in tmp_path.iterdir()] == ["out"]
 
 
 def test_truth_covers_every_point_and_every_image(drive: Drive) -> None:

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from guardrail_core.classes import TruthClass
-from guardrail_core.drive import Drive, load_drive
 from guardrail_core.errors import SceneSpecError
 from guardrail_core.extract.lattice import build_lattice
-from guardrail_core.scanner_model import MULTIBEAM
+from guardrail_core.formats.drive import Drive, load_drive
+from guardrail_core.sensors.scanner import MULTIBEAM
 from guardrail_core.synth.multibeam import hdl64_elevations_deg
 from guardrail_core.synth.scene import build_scene, load_scene_spec
 from guardrail_core.synth.simulate import SimulationOptions, simulate_drive

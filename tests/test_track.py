@@ -10,7 +10,7 @@ import pytest
 
 from guardrail_core.errors import GuardrailError
 from guardrail_core.extract.track import TrackCoordinates, track_coordinates
-from guardrail_core.trajectory import Trajectory
+from guardrail_core.sensors.trajectory import Trajectory
 
 SPEED = 10.0  # m/s
 ROAD_Z = 10.0  # road surface height in the local frame, metres

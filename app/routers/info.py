@@ -7,13 +7,14 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Depends, Request
 
 from app.dependencies import get_session
+from app.schemas import Info
 from app.session import ReviewSession
 
 router = APIRouter(prefix="/api", tags=["info"])
 Session = Annotated[ReviewSession, Depends(get_session)]
 
 
-@router.get("/info")
+@router.get("/info", response_model=Info, response_model_exclude_unset=True)
 def get_info(session: Session, request: Request) -> dict[str, Any]:
     """The drive, the run, the active model and the URL of the 3D scene (viser)."""
     info = session.describe()

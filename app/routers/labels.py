@@ -8,6 +8,7 @@ from fastapi import APIRouter, Depends, HTTPException
 from pydantic import BaseModel, Field
 
 from app.dependencies import get_session
+from app.schemas import NOT_FOUND, History, Relabelled
 from app.segment_views import segment_rows
 from app.session import Relabel, ReviewSession
 
@@ -49,25 +50,25 @@ def _relabel(session: ReviewSession, ids: list[int], body: LabelBody | BatchBody
         raise HTTPException(404, detail=str(exc.args[0])) from exc
 
 
-@router.put("/segments/{segment_id}/label")
+@router.put("/segments/{segment_id}/label", response_model=Relabelled, responses=NOT_FOUND)
 def put_label(session: Session, segment_id: int, body: LabelBody) -> dict[str, Any]:
     """Label every point of one segment."""
     return _relabel(session, [segment_id], body, "none")
 
 
-@router.post("/labels/batch")
+@router.post("/labels/batch", response_model=Relabelled, responses=NOT_FOUND)
 def post_batch(session: Session, body: BatchBody) -> dict[str, Any]:
     """Label many segments (or, with ``expand="component"``, their whole connected runs)."""
     return _relabel(session, body.segments, body, body.expand)
 
 
-@router.post("/labels/undo")
+@router.post("/labels/undo", response_model=Relabelled)
 def post_undo(session: Session, body: UndoBody | None = None) -> dict[str, Any]:
     """Revert the last labelling (of ``who`` when given)."""
     return _answer(session, session.undo(who=body.who if body else None))
 
 
-@router.get("/labels/history")
+@router.get("/labels/history", response_model=History)
 def get_history(session: Session, limit: int = 50) -> dict[str, Any]:
     """The latest label batches, newest first."""
     return {"items": session.store.history(limit=max(1, min(limit, 1000)))}

@@ -8,6 +8,7 @@ from fastapi import APIRouter, Depends, HTTPException, Query
 from pydantic import BaseModel, Field
 
 from app.dependencies import get_session
+from app.schemas import NOT_FOUND, Queue, Selection
 from app.segment_views import review_queue
 from app.session import ReviewSession
 
@@ -19,18 +20,18 @@ class SelectionBody(BaseModel):
     segments: list[int] = Field(max_length=100_000)
 
 
-@router.get("/queue")
+@router.get("/queue", response_model=Queue)
 def get_queue(session: Session, limit: Annotated[int, Query(ge=1, le=500)] = 20) -> dict[str, Any]:
     """Unreviewed segments, most worth a look first (disagreement, then uncertainty)."""
     return {"items": review_queue(session, limit)}
 
 
-@router.get("/selection")
+@router.get("/selection", response_model=Selection)
 def get_selection(session: Session) -> dict[str, Any]:
     return {"segments": [int(s) for s in session.selection]}
 
 
-@router.put("/selection")
+@router.put("/selection", response_model=Selection, responses=NOT_FOUND)
 def put_selection(session: Session, body: SelectionBody) -> dict[str, Any]:
     """Select segments (the 3D view highlights them and flies to the first)."""
     try:

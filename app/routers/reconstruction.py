@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -13,9 +12,12 @@ from pydantic import BaseModel, Field
 from app import review_jobs
 from app.dependencies import get_jobs, get_session
 from app.jobs import JobRunner
+from app.schemas import CONFLICT, NOT_FOUND, Downloads, JobStarted, Reconstruction, file_response
 from app.session import ReviewSession
-from guardrail_core.errors import InvalidOptionError
-from guardrail_core.reconstruction import RECONSTRUCTION_DIR, ReconstructionParams
+from guardrail_core.errors import InvalidOptionError, NoReconstructionError, RunFolderError
+from guardrail_core.formats.run_folder_paths import RunFolder
+from guardrail_core.reconstruct.pipeline import ReconstructionParams
+from guardrail_core.reconstruct.run_models import load_run_models
 
 router = APIRouter(prefix="/api", tags=["reconstruction"])
 Session = Annotated[ReviewSession, Depends(get_session)]
@@ -30,62 +32,64 @@ MEDIA_TYPES = {
 }
 
 
-def downloadable(run_root: Path) -> dict[str, Path]:
+def downloadable(run: RunFolder) -> dict[str, Path]:
     """Name -> file of everything the reconstruction offers for download (the only files the
     download route serves: a request names a key of this table, never a path)."""
-    folder = run_root / RECONSTRUCTION_DIR
-    files = {}
-    for pattern in ("inventory.*", "meshes/*"):
-        for path in sorted(folder.glob(pattern)):
-            if path.is_file() and path.suffix in MEDIA_TYPES:
-                files[path.relative_to(folder).as_posix()] = path
-    return files
+    files = run.reconstruction.output_files()
+    return {name: path for name, path in files.items() if path.suffix in MEDIA_TYPES}
 
 
-@router.get("/downloads")
+@router.get("/downloads", response_model=Downloads)
 def list_downloads(session: Session) -> dict[str, Any]:
     """The meshes (GLB, PLY, OBJ) and the inventory (GeoJSON, CSV) of the reconstruction."""
     return {
         "items": [
             {"name": name, "bytes": path.stat().st_size, "url": f"/api/downloads/{name}"}
-            for name, path in downloadable(session.run.root).items()
+            for name, path in downloadable(session.folder).items()
         ]
     }
 
 
-@router.get("/downloads/{name:path}", response_class=FileResponse)
+@router.get(
+    "/downloads/{name:path}",
+    response_class=FileResponse,
+    responses={**file_response(MEDIA_TYPES.values(), "the file"), **NOT_FOUND},
+)
 def get_download(session: Session, name: str) -> FileResponse:
-    path = downloadable(session.run.root).get(name)
+    path = downloadable(session.folder).get(name)
     if path is None:
         raise HTTPException(404, detail=f"no download {name!r}; see /api/downloads")
     return FileResponse(path, media_type=MEDIA_TYPES[path.suffix], filename=Path(name).name)
 
 
-@router.get("/reconstruction")
+@router.get("/reconstruction", response_model=Reconstruction, responses=CONFLICT)
 def get_reconstruction(session: Session) -> dict[str, Any]:
-    """The reconstruction's parameters and, per run, its type, units and notes."""
-    path = session.run.root / RECONSTRUCTION_DIR / "models.json"
-    if not path.is_file():
+    """The reconstruction's parameters and, per run, its type, units and notes; 409 when the
+    run's reconstruction cannot be read (another format version, damaged: reconstruct again)."""
+    try:
+        models = load_run_models(session.folder)
+    except NoReconstructionError:
         return {"params": ReconstructionParams().to_json(), "runs": [], "present": False}
-    data = json.loads(path.read_text())
+    except RunFolderError as exc:
+        raise HTTPException(409, detail=str(exc)) from exc
     runs = [
         {
-            "run_id": r["run_id"],
-            "type": (r.get("model") or {}).get("type"),
-            "poles": len(r["poles"]),
-            "units": len(r["units"]),
-            "notes": r.get("notes", []),
+            "run_id": r.run_id,
+            "type": None if r.model is None else r.model.type,
+            "poles": len(r.poles),
+            "units": len(r.units),
+            "notes": list(r.notes),
         }
-        for r in data["runs"]
+        for r in models.runs
     ]
-    return {"params": data["params"], "runs": runs, "present": True}
+    return {"params": models.params.to_json(), "runs": runs, "present": True}
 
 
 class ApplyBody(BaseModel):
     params: dict[str, dict[str, Any]] = Field(default_factory=dict)
 
 
-@router.post("/reconstruction/apply", status_code=202)
+@router.post("/reconstruction/apply", status_code=202, response_model=JobStarted)
 def post_apply(session: Session, jobs: Jobs, body: ApplyBody) -> dict[str, Any]:
     """Reconstruct every guardrail again from the current labels with these parameters (by
     stage, as in ``models.json``; missing ones keep their defaults); poll the job."""

@@ -9,6 +9,7 @@ from fastapi import APIRouter, Depends, HTTPException, Query
 from fastapi.responses import FileResponse
 
 from app.dependencies import get_session
+from app.schemas import JPEG, NOT_FOUND, SegmentDetail, SegmentPage
 from app.segment_views import filter_segments, segment_rows
 from app.session import ReviewSession
 from guardrail_core.extract.crops import CROP_OK
@@ -25,7 +26,7 @@ def _segment(session: ReviewSession, segment_id: int) -> int:
     return segment_id
 
 
-@router.get("")
+@router.get("", response_model=SegmentPage)
 def list_segments(
     session: Session,
     offset: Annotated[int, Query(ge=0)] = 0,
@@ -56,7 +57,7 @@ def list_segments(
     }
 
 
-@router.get("/{segment_id}")
+@router.get("/{segment_id}", response_model=SegmentDetail, responses=NOT_FOUND)
 def get_segment(session: Session, segment_id: int) -> dict[str, Any]:
     """One segment with its image, rectangle and label history."""
     s = _segment(session, segment_id)
@@ -64,14 +65,14 @@ def get_segment(session: Session, segment_id: int) -> dict[str, Any]:
     image = int(session.run.segments["image"][s])
     points = session.index.points_of([s])
     row.update(
-        image=session.run.info["images"][image] if image >= 0 else None,
+        image=session.run.info.images[image] if image >= 0 else None,
         rect=[int(v) for v in session.run.segments["rect"][s]],
         history=session.store.history(points=points, limit=20),
     )
     return row
 
 
-@router.get("/{segment_id}/crop.jpg", response_class=FileResponse)
+@router.get("/{segment_id}/crop.jpg", response_class=FileResponse, responses={**JPEG, **NOT_FOUND})
 def get_crop(session: Session, segment_id: int) -> FileResponse:
     """The crop the classifier saw (JPEG); 404 for a segment without one."""
     s = _segment(session, segment_id)

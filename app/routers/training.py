@@ -11,6 +11,7 @@ from app import review_jobs
 from app.dependencies import get_jobs, get_session
 from app.jobs import JobRunner
 from app.model_registry import UnknownModelError
+from app.schemas import CONFLICT, NOT_FOUND, Activated, Job, JobList, JobStarted, ModelList
 from app.session import ReviewSession
 
 router = APIRouter(prefix="/api", tags=["training"])
@@ -23,7 +24,7 @@ class TrainBody(BaseModel):
     include_unreviewed: bool = True
 
 
-@router.post("/train", status_code=202)
+@router.post("/train", status_code=202, response_model=JobStarted, responses=CONFLICT)
 def post_train(session: Session, jobs: Jobs, body: TrainBody | None = None) -> dict[str, Any]:
     """Start fine-tuning a model from the label store; poll ``/api/jobs/{job}``.
 
@@ -40,14 +41,17 @@ def post_train(session: Session, jobs: Jobs, body: TrainBody | None = None) -> d
     return {"job": jobs.submit("train", work).id}
 
 
-@router.get("/jobs")
+# exclude_unset: metrics of older model folders lack some fields (see app.schemas)
+@router.get("/jobs", response_model=JobList, response_model_exclude_unset=True)
 def list_jobs(jobs: Jobs, kind: str | None = None) -> dict[str, Any]:
     """Jobs of this server (of one ``kind`` when given: train, reconstruct), newest first; a
     reloaded page finds a training still running here."""
     return {"items": [job.to_json() for job in jobs.list(kind)]}
 
 
-@router.get("/jobs/{job_id}")
+@router.get(
+    "/jobs/{job_id}", response_model=Job, response_model_exclude_unset=True, responses=NOT_FOUND
+)
 def get_job(jobs: Jobs, job_id: str) -> dict[str, Any]:
     job = jobs.get(job_id)
     if job is None:
@@ -55,13 +59,13 @@ def get_job(jobs: Jobs, job_id: str) -> dict[str, Any]:
     return job.to_json()
 
 
-@router.get("/models")
+@router.get("/models", response_model=ModelList, response_model_exclude_unset=True)
 def get_models(session: Session) -> dict[str, Any]:
     """Every model known to the app, newest first; ``active`` made the run's predictions."""
     return {"active": session.models.active_version, "models": session.models.list()}
 
 
-@router.post("/models/{version}/activate")
+@router.post("/models/{version}/activate", response_model=Activated, responses=NOT_FOUND)
 def post_activate(session: Session, version: str) -> dict[str, Any]:
     """Re-predict the run with this model and make it the active one."""
     try:

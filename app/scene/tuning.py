@@ -1,13 +1,14 @@
 """Live threshold tuning: re-run one run's unit model from its superimposed points (§4.3-4.4).
 
 The sliders of the 3D scene change a few reconstruction parameters; each change re-runs
-:func:`guardrail_core.reconstruction.reconstruct_unit` on the points kept in
+:func:`guardrail_core.reconstruct.pipeline.reconstruct_unit` on the points kept in
 ``reconstruction/superimposed.npz`` and rebuilds that run's mesh, without touching the run folder.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -15,30 +16,33 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from guardrail_core.formats.run_folder_paths import RunFolder
 from guardrail_core.reconstruct.assemble import run_mesh
 from guardrail_core.reconstruct.model import RunModel
-from guardrail_core.reconstruction import (
-    RECONSTRUCTION_DIR,
+from guardrail_core.reconstruct.pipeline import (
     ReconstructionParams,
     UnitReconstruction,
-    load_reconstruction,
     reconstruct_unit,
 )
+from guardrail_core.reconstruct.run_models import load_run_models
 
 #: The sliders: (stage, parameter) -> (label, min, max, step).
 TUNABLE: dict[tuple[str, str], tuple[str, float, float, float]] = {
     ("pipes", "histogram_factor"): ("histogram threshold (x median)", 1.0, 6.0, 0.1),
     ("pipes", "radius_share"): ("share of points for the radius", 0.5, 1.0, 0.01),
-    ("pipes", "slice_interval"): ("pipe slice interval (m)", 0.01, 0.1, 0.005),
+    ("pipes", "slice_interval_m"): ("pipe slice interval (m)", 0.01, 0.1, 0.005),
     ("pipes", "taubin_iterations"): ("smoothing passes (Taubin)", 0, 40, 1),
-    ("beams", "slice_interval"): ("beam slice interval (m)", 0.005, 0.05, 0.005),
+    ("beams", "slice_interval_m"): ("beam slice interval (m)", 0.005, 0.05, 0.005),
 }
 
 
 def with_value(
     params: ReconstructionParams, stage: str, name: str, value: float
 ) -> ReconstructionParams:
-    """``params`` with one parameter changed (an int parameter stays an int)."""
+    """``params`` with one parameter changed (an int parameter stays an int).
+
+    Raises :class:`~guardrail_core.params.ParameterError` for a value outside its range.
+    """
     part = getattr(params, stage)
     kind = type(getattr(part, name))
     return dataclasses.replace(params, **{stage: dataclasses.replace(part, **{name: kind(value)})})
@@ -58,13 +62,19 @@ class RunTuner:
 
     Parameters
     ----------
-    run_root : the run folder (with ``reconstruction/``)
+    run : the run folder (with ``reconstruction/``), or its path
+
+    Raises
+    ------
+    RunFolderError
+        The run has no reconstruction, or one this version cannot read
+        (:func:`guardrail_core.reconstruct.run_models.load_run_models`).
     """
 
-    def __init__(self, run_root: Path) -> None:
-        self.runs, data = load_reconstruction(run_root)
-        self.params = ReconstructionParams.from_json(data["params"])
-        self._npz = Path(run_root) / RECONSTRUCTION_DIR / "superimposed.npz"
+    def __init__(self, run: RunFolder | str | os.PathLike) -> None:
+        self._models = load_run_models(run if isinstance(run, RunFolder) else RunFolder(Path(run)))
+        self.runs = list(self._models.runs)
+        self.params = self._models.params
         self._points: dict[int, np.ndarray] = {}
 
     def tunable_runs(self) -> list[RunModel]:
@@ -72,16 +82,13 @@ class RunTuner:
         return [r for r in self.runs if r.model is not None]
 
     def run(self, run_id: int) -> RunModel:
-        for run in self.runs:
-            if run.run_id == run_id:
-                return run
-        raise KeyError(f"no reconstructed run {run_id}")
+        """The model of run ``run_id``; KeyError where none was reconstructed."""
+        return self._models.run(run_id)
 
     def points(self, run_id: int) -> np.ndarray:
         """(M, 3) float64 superimposed points of a run, unit coordinates."""
         if run_id not in self._points:
-            with np.load(self._npz, allow_pickle=False) as data:
-                self._points[run_id] = data[f"run_{run_id:03d}_points"].astype(np.float64)
+            self._points[run_id] = self._models.superimposed_points(run_id)
         return self._points[run_id]
 
     def retune(self, run_id: int, params: ReconstructionParams) -> Retuned:
@@ -92,7 +99,8 @@ class RunTuner:
         KeyError
             No run of that id has a unit model.
         ReconstructionError
-            The parameters are out of range.
+            The unit model cannot be re-run from these points (parameters out of range are
+            refused earlier, when they are made: :class:`~guardrail_core.params.ParameterError`).
         """
         clock = time.perf_counter()
         run = self.run(run_id)

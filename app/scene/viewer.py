@@ -30,8 +30,9 @@ from app.segment_views import review_queue
 from app.session import ReviewSession
 from guardrail_core.errors import GuardrailError, RunFolderError
 from guardrail_core.extract.track import track_coordinates
+from guardrail_core.io.meshes import run_file_stem
 from guardrail_core.reconstruct.assemble import run_mesh
-from guardrail_core.reconstruction import RECONSTRUCTION_DIR, ReconstructionParams
+from guardrail_core.reconstruct.pipeline import ReconstructionParams
 
 #: Mesh colours: the reconstruction, a retuned run, and the ghost of its previous mesh.
 MESH_COLOUR = (230, 230, 235)
@@ -40,6 +41,8 @@ GHOST_COLOUR = (150, 150, 150)
 GHOST_OPACITY = 0.3
 #: Seconds to wait after the last slider move before re-running (sliders fire on every step).
 DEBOUNCE_S = 0.15
+#: The scene folder of the reconstructed meshes.
+MESH_NODES = "/reconstruction"
 
 
 class ReviewScene:
@@ -218,14 +221,12 @@ class ReviewScene:
             handle.remove()
         self._meshes = {}
         try:
-            self._tuner = RunTuner(self.session.run.root)
+            self._tuner = RunTuner(self.session.folder)
         except (RunFolderError, OSError, KeyError):
             self._tuner = None
-        folder = self.session.run.root / RECONSTRUCTION_DIR / "meshes"
-        for path in sorted(folder.glob("run_*.glb")):
-            run_id = int(path.stem.split("_")[1])
+        for run_id, path in self.session.folder.reconstruction.mesh_files("glb").items():
             self._meshes[run_id] = self.server.scene.add_glb(
-                f"/reconstruction/run_{run_id:03d}", glb_data=path.read_bytes()
+                _mesh_node(run_id), glb_data=path.read_bytes()
             )
         self._update_tuning_runs()
 
@@ -478,7 +479,7 @@ class ReviewScene:
         except (GuardrailError, ValueError) as exc:
             self._tune_text.content = f"**Not re-run:** {exc}"
             return None
-        name = f"/reconstruction/run_{run_id:03d}"
+        name = _mesh_node(run_id)
         previous = self._meshes.pop(run_id, None)
         ghost = self._shown_mesh.get(run_id)
         if ghost is None:  # first re-run: the ghost is the reconstruction's own mesh
@@ -487,7 +488,7 @@ class ReviewScene:
             previous.remove()
         if ghost is not None:
             self._ghosts[run_id] = self.server.scene.add_mesh_simple(
-                f"/reconstruction/ghost_{run_id:03d}",
+                _mesh_node(run_id, ghost=True),
                 vertices=ghost.vertices.astype(np.float32),
                 faces=ghost.faces.astype(np.uint32),
                 color=GHOST_COLOUR,
@@ -528,3 +529,11 @@ class ReviewScene:
         params = self.slider_params()
         job = self.jobs.submit("reconstruct", review_jobs.reconstruct(self.session, params))
         self._tune_text.content = f"reconstructing the drive (job {job.id})…"
+
+
+def _mesh_node(run_id: int, *, ghost: bool = False) -> str:
+    """The scene node of a run's mesh (``MESH_NODES/run_NNN``, named as its file and its GLB
+    node) or of the ghost of its previous mesh (``MESH_NODES/ghost_NNN``)."""
+    if ghost:
+        return f"{MESH_NODES}/ghost_{run_id:03d}"
+    return f"{MESH_NODES}/{run_file_stem(run_id)}"

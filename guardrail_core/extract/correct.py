@@ -15,35 +15,70 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from guardrail_core.errors import InvalidOptionError
+from guardrail_core.params import StageParams, param
 
 
 @dataclass(frozen=True)
-class CorrectionParams:
+class CorrectionParams(StageParams):
     """Rules of label correction."""
 
-    touch_distance_m: float = 0.3
-    """Segments whose lateral and height extents come within this many metres of each other, in
-    the same or adjacent slices, are neighbours."""
-    fill_margin_m: float = 0.05
-    """An other segment inside a run becomes guardrail only if it lies within the lateral and
-    height extent of its guardrail neighbours, widened by this many metres (so a curb or a
-    sidewalk beside a guardrail stays other)."""
-    post_width_m: float = 0.15
-    """Metres. An other segment inside a run that stands on the ground (``post_foot_m``),
-    reaches at least halfway up its guardrail neighbours but no higher than their top (widened
-    by ``fill_margin_m``), and lies within this of them beside the road is a post and becomes
-    guardrail: a post stands below the rails and behind them (they are bolted to its face).
-    The classifier misses far posts' slices most often, and a missed post cuts the run there.
-    A curb beside or under the rails does not reach halfway up."""
-    post_foot_m: float = 0.3
-    """Metres. A post's segment reaches this close to the road surface (the road takes a far
-    post's lowest 0.15 m); a bicycle rack's bars behind a guardrail do not."""
-    max_hole_slices: int = 2
-    """1 or 2. Other segments inside a run are filled in holes of up to this many consecutive
-    slices (each segment of a hole of two fitting the guardrail segments on its side)."""
-    min_run_slices: int = 2
-    """A group of neighbouring guardrail segments spanning fewer slices than this is isolated and
-    becomes other (the paper: an isolated segment)."""
+    touch_distance_m: float = param(
+        0.3,
+        unit="m",
+        ge=0,
+        le=10,
+        doc="segments whose lateral and height extents come within this of each other, in the "
+        "same or adjacent slices, are neighbours",
+    )
+    fill_margin_m: float = param(
+        0.05,
+        unit="m",
+        ge=0,
+        le=10,
+        doc="an other segment inside a run becomes guardrail only if it lies within the lateral "
+        "and height extent of its guardrail neighbours, widened by this (so a curb or a "
+        "sidewalk beside a guardrail stays other)",
+    )
+    post_width_m: float = param(
+        0.15,
+        unit="m",
+        ge=0,
+        le=10,
+        doc="an other segment inside a run that stands on the ground (post_foot_m), reaches at "
+        "least post_min_reach of the way up its guardrail neighbours but no higher than their "
+        "top (widened by fill_margin_m), and lies within this of them beside the road is a post "
+        "and becomes guardrail: a post stands below the rails and behind them (they are bolted "
+        "to its face). The classifier misses far posts' slices most often, and a missed post "
+        "cuts the run there",
+    )
+    post_foot_m: float = param(
+        0.3,
+        unit="m",
+        ge=0,
+        le=10,
+        doc="a post's segment reaches this close to the road surface (the road takes a far "
+        "post's lowest 0.15 m); a bicycle rack's bars behind a guardrail do not",
+    )
+    post_min_reach: float = param(
+        0.5,
+        ge=0,
+        le=1,
+        doc="share of the way from the bottom of a post's guardrail neighbours to their top "
+        "that the post's top reaches at least; a curb beside or under the rails does not",
+    )
+    max_hole_slices: int = param(
+        2,
+        choices=(1, 2),
+        doc="other segments inside a run are filled in holes of up to this many consecutive "
+        "slices (each segment of a hole of two fitting the guardrail segments on its side)",
+    )
+    min_run_slices: int = param(
+        2,
+        ge=1,
+        le=1000,
+        doc="a group of neighbouring guardrail segments spanning fewer slices than this is "
+        "isolated and becomes other (the paper: an isolated segment)",
+    )
 
 
 @dataclass(frozen=True)
@@ -158,7 +193,7 @@ def _fits_between(
     out = np.zeros(len(lateral), bool)
     near = np.isfinite(low[:, 0])
     lateral, height, low, high = lateral[near], height[near], low[near], high[near]
-    margin, post = params.fill_margin_m, params.post_width_m
+    margin, post, reach = params.fill_margin_m, params.post_width_m, params.post_min_reach
     below_top = height[:, 1] <= high[:, 1] + margin
     within = (
         (lateral[:, 0] >= low[:, 0] - margin)
@@ -170,7 +205,7 @@ def _fits_between(
         (height[:, 0] <= params.post_foot_m)
         & (lateral[:, 0] >= low[:, 0] - post)
         & (lateral[:, 1] <= high[:, 0] + post)
-        & (height[:, 1] >= 0.5 * (low[:, 1] + high[:, 1]))
+        & (height[:, 1] >= (1 - reach) * low[:, 1] + reach * high[:, 1])
         & below_top
     )
     out[near] = within | is_post
@@ -206,8 +241,6 @@ def correct_labels(
     ):
         if len(array) != n:
             raise InvalidOptionError(f"correct_labels: {n} labels but {len(array)} rows of {name}")
-    if params.max_hole_slices not in (1, 2):
-        raise InvalidOptionError(f"max_hole_slices must be 1 or 2, got {params.max_hole_slices}")
     if n == 0:
         return labels
     slice_index = np.asarray(extents.slice_index, np.int64)

@@ -14,33 +14,66 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from guardrail_core.camera_model import Camera
-from guardrail_core.drive import ImageRecord
 from guardrail_core.extract.segments import Segments, SegmentSummary
-
-# Crop status of a segment.
-CROP_OK = 0
-CROP_NO_IMAGE = 1
-"""No image contains all of the segment's points (no camera saw it whole)."""
-CROP_TOO_SMALL = 2
-"""The segment has too few points to be worth a crop; it stays a segment all the same."""
-CROP_STATUS_NAMES = {CROP_OK: "ok", CROP_NO_IMAGE: "no_image", CROP_TOO_SMALL: "too_small"}
+from guardrail_core.formats.drive import ImageRecord
+from guardrail_core.formats.run_folder import (  # the codes the run folder stores
+    CROP_NO_IMAGE,
+    CROP_OK,
+    CROP_TOO_SMALL,
+)
+from guardrail_core.params import StageParams, param
+from guardrail_core.sensors.camera import Camera
 
 
 @dataclass(frozen=True)
-class CropParams:
+class CropParams(StageParams):
     """How images are chosen and cropped."""
 
-    time_window_s: float = 3.0
-    """Images taken within this many seconds of a segment's first or last point are candidates."""
-    max_range_m: float = 40.0
-    """Cameras farther than this from a segment's centre are not candidates (too small a view)."""
-    min_points: int = 3
-    """Segments with fewer points get no crop (status ``too_small``)."""
-    margin: float = 0.15
-    """The crop extends the points' rectangle by this share of its size on every side."""
-    min_size_px: int = 32
-    """Smallest crop side in image pixels, so a far or tiny segment still shows its context."""
+    time_window_s: float = param(
+        3.0,
+        unit="s",
+        ge=0,
+        le=3600,
+        doc="images taken within this long of a segment's first or last point are candidates",
+    )
+    max_range_m: float = param(
+        40.0,
+        unit="m",
+        gt=0,
+        le=1000,
+        doc="cameras farther than this from a segment's centre are not candidates (too small a "
+        "view)",
+    )
+    min_depth_m: float = param(
+        0.1,
+        unit="m",
+        ge=0,
+        le=100,
+        doc="a segment's centre must lie at least this far in front of a candidate camera",
+    )
+    min_points: int = param(
+        3, ge=1, le=1_000_000, doc="segments with fewer points get no crop (status too_small)"
+    )
+    margin: float = param(
+        0.15,
+        ge=0,
+        le=10,
+        doc="the crop extends the points' rectangle by this share of its size on every side",
+    )
+    min_size_px: int = param(
+        32,
+        unit="px",
+        ge=1,
+        le=10_000,
+        doc="smallest crop side in image pixels, so a far or tiny segment still shows its context",
+    )
+
+    def check_relations(self) -> None:
+        if self.min_depth_m >= self.max_range_m:
+            self.fail(
+                f"min_depth_m ({self.min_depth_m} m) must lie below max_range_m "
+                f"({self.max_range_m} m)"
+            )
 
 
 @dataclass(frozen=True)
@@ -117,7 +150,9 @@ def choose_images(
     rotation = T_world_camera[pair_image, :3, :3]
     position = T_world_camera[pair_image, :3, 3]
     in_camera = np.einsum("pji,pj->pi", rotation, centroid[pair_segment] - position)
-    near = (in_camera[:, 2] > 0.1) & (np.linalg.norm(in_camera, axis=1) < params.max_range_m)
+    near = (in_camera[:, 2] > params.min_depth_m) & (
+        np.linalg.norm(in_camera, axis=1) < params.max_range_m
+    )
     pair_segment, pair_image = pair_segment[near], pair_image[near]
 
     best_area = np.zeros(n_segments, np.int64)

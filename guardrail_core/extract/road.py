@@ -15,6 +15,7 @@ import numpy as np
 from guardrail_core.errors import InvalidOptionError
 from guardrail_core.extract.lattice import Lattice, lattice_normals
 from guardrail_core.extract.track import TrackCoordinates
+from guardrail_core.params import StageParams, param
 
 # Codes of :func:`remove_road`'s ``kept`` result for the points that are not kept.
 ROAD = 1
@@ -22,37 +23,91 @@ OFF_ROAD = 2
 
 
 @dataclass(frozen=True)
-class RoadParams:
-    """Thresholds of road removal. Lengths in metres, angles in degrees.
+class RoadParams(StageParams):
+    """Thresholds of road removal.
 
     The paper removes points "equal to or smaller than the estimated road height" with normals
     "close to the Z axis"; it gives no numbers, so the tolerances here are ours.
     """
 
-    height_tolerance_m: float = 0.25
-    """Road surface lies at most this far above the trajectory's road height (crown, grade,
-    sidewalks and verges at curb height). Guardrail rails start higher."""
-    max_normal_tilt_deg: float = 25.0
-    """Normals within this angle of vertical are ground."""
-    normal_neighbour_distance_m: float = 0.2
-    """Lattice neighbours farther than this lie on another surface (a rail above the sidewalk)
-    and are not used for normals."""
-    normal_phase_step: int = 4
-    """Normals span this many pulses either side along the scan line (a baseline of centimetres,
-    well above the range noise)."""
-    road_level_m: float = 0.08
-    """Ground points within this height of the road height mark the roadway, whose lateral
-    extent gives the road edges."""
-    edge_bin_m: float = 5.0
-    """Road edges are measured per stretch of this length along the trajectory."""
-    edge_margin_m: float = 5.0
-    """Points farther than this outside the road edges are removed as far from the road (keeps
-    the sidewalk and what stands along it, drops the buildings behind)."""
-    max_lateral_m: float = 15.0
-    """Hard limit on distance from the trajectory, and the road half-width assumed where a
-    stretch has no road points."""
-    max_height_m: float = 3.0
-    """Points higher than this above the road are removed (guardrails are about 1 m high)."""
+    height_tolerance_m: float = param(
+        0.25,
+        unit="m",
+        ge=0,
+        le=2,
+        doc="road surface lies at most this far above the trajectory's road height (crown, "
+        "grade, sidewalks and verges at curb height); guardrail rails start higher",
+    )
+    max_normal_tilt_deg: float = param(
+        25.0, unit="deg", gt=0, lt=90, doc="normals within this angle of vertical are ground"
+    )
+    normal_neighbour_distance_m: float = param(
+        0.2,
+        unit="m",
+        gt=0,
+        le=5,
+        doc="lattice neighbours farther than this lie on another surface (a rail above the "
+        "sidewalk) and are not used for normals",
+    )
+    normal_phase_step: int = param(
+        4,
+        ge=1,
+        le=1000,
+        doc="normals span this many pulses either side along the scan line (a baseline of "
+        "centimetres, well above the range noise)",
+    )
+    road_level_m: float = param(
+        0.08,
+        unit="m",
+        ge=0,
+        le=1,
+        doc="ground points within this height of the road height mark the roadway, whose "
+        "lateral extent gives the road edges",
+    )
+    edge_bin_m: float = param(
+        5.0,
+        unit="m",
+        gt=0,
+        le=1000,
+        doc="road edges are measured per stretch of this length along the trajectory",
+    )
+    edge_min_points: int = param(
+        20,
+        ge=1,
+        le=1_000_000,
+        doc="a stretch with fewer road-level points has no edges of its own: it takes its "
+        "neighbours'",
+    )
+    edge_percentile: float = param(
+        1.0,
+        ge=0,
+        lt=50,
+        doc="percent: a stretch's road edges are this percentile of its road-level points' "
+        "lateral offsets and 100 minus it (a few stray points do not widen the road)",
+    )
+    edge_margin_m: float = param(
+        5.0,
+        unit="m",
+        ge=0,
+        le=100,
+        doc="points farther than this outside the road edges are removed as far from the road "
+        "(keeps the sidewalk and what stands along it, drops the buildings behind)",
+    )
+    max_lateral_m: float = param(
+        15.0,
+        unit="m",
+        gt=0,
+        le=200,
+        doc="hard limit on distance from the trajectory, and the road half-width assumed where "
+        "a stretch has no road points",
+    )
+    max_height_m: float = param(
+        3.0,
+        unit="m",
+        gt=0,
+        le=100,
+        doc="points higher than this above the road are removed (guardrails are about 1 m high)",
+    )
 
 
 def remove_road(
@@ -117,8 +172,9 @@ def _road_edges(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Left and right road edge (N,) in lateral metres at every point's station.
 
-    Per stretch of ``edge_bin_m`` the edges are the 1st and 99th percentiles of the lateral
-    positions of road-level ground points; stretches without any take their neighbours' edges.
+    Per stretch of ``edge_bin_m`` the edges are the ``edge_percentile`` and 100 minus
+    ``edge_percentile`` percentiles of the lateral positions of road-level ground points;
+    stretches with fewer than ``edge_min_points`` take their neighbours' edges.
     """
     n = len(track.station)
     if n == 0:
@@ -133,9 +189,10 @@ def _road_edges(
     level_bins = bins[level]
     order = np.argsort(level_bins, kind="stable")
     starts = np.searchsorted(level_bins[order], np.arange(n_bins + 1))
-    for b in np.flatnonzero(np.diff(starts) >= 20):
+    percentile = params.edge_percentile
+    for b in np.flatnonzero(np.diff(starts) >= params.edge_min_points):
         values = lateral[order[starts[b] : starts[b + 1]]]
-        right[b], left[b] = np.percentile(values, [1, 99])
+        right[b], left[b] = np.percentile(values, [percentile, 100 - percentile])
     have = np.flatnonzero(~np.isnan(left))
     if len(have) == 0:
         return np.full(n, params.max_lateral_m), np.full(n, -params.max_lateral_m)

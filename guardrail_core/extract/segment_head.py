@@ -9,9 +9,7 @@ that never saw that crop), so it learns how far to trust the crop classifier on 
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 import torch
@@ -19,45 +17,26 @@ from torch import nn
 
 from guardrail_core.errors import InvalidOptionError, ModelFormatError
 from guardrail_core.extract.torch_threads import one_thread
+from guardrail_core.params import StageParams, param
 
 _LOGIT_CLIP = 1e-5  # crop probabilities are clipped to [eps, 1 - eps] before the logit
 
 
 @dataclass(frozen=True)
-class SegmentHeadParams:
-    """Training of the segment head.
+class SegmentHeadParams(StageParams):
+    """Training of the segment head."""
 
-    Attributes
-    ----------
-    hidden_units : width of the one hidden ReLU layer
-    epochs : full-batch AdamW steps
-    lr : learning rate
-    weight_decay : AdamW decoupled weight decay
-    folds : the training crops are split into this many folds of whole spatial blocks; each fold's
-        crop logits come from a crop classifier trained on the other folds
-    """
-
-    hidden_units: int = 64
-    epochs: int = 1000
-    lr: float = 1e-2
-    weight_decay: float = 1e-4
-    folds: int = 4
-
-    def __post_init__(self) -> None:
-        for name in ("hidden_units", "epochs"):
-            value = getattr(self, name)
-            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
-                raise InvalidOptionError(f"segment head: {name} must be >= 1, got {value!r}")
-        if not isinstance(self.folds, int) or self.folds < 2:
-            raise InvalidOptionError(f"segment head: folds must be >= 2, got {self.folds!r}")
-        if not self.lr > 0 or not self.weight_decay >= 0:
-            raise InvalidOptionError(
-                f"segment head: lr must be > 0 and weight_decay >= 0, got {self.lr!r} and "
-                f"{self.weight_decay!r}"
-            )
-
-    def to_json(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
+    hidden_units: int = param(64, ge=1, le=4096, doc="width of the one hidden ReLU layer")
+    epochs: int = param(1000, ge=1, le=100_000, doc="full-batch AdamW steps")
+    lr: float = param(1e-2, gt=0, le=1, doc="learning rate")
+    weight_decay: float = param(1e-4, ge=0, le=1, doc="AdamW decoupled weight decay")
+    folds: int = param(
+        4,
+        ge=2,
+        le=100,
+        doc="the training crops are split into this many folds of whole spatial blocks; each "
+        "fold's crop logits come from a crop classifier trained on the other folds",
+    )
 
 
 def head_inputs(features: np.ndarray, crop_proba: np.ndarray) -> np.ndarray:

@@ -15,43 +15,94 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from guardrail_core.extract.lattice import Lattice
+from guardrail_core.params import StageParams, param
+
+#: Sums of bin widths that should equal a length differ from it by rounding only.
+_ROUNDING_M = 1e-9
 
 
 @dataclass(frozen=True)
-class SegmentParams:
+class SegmentParams(StageParams):
     """Thresholds of the wireframe and the slicing."""
 
-    link_distance_m: float = 0.3
-    """Lattice neighbours closer than this (metres) are joined into the wireframe."""
-    along_reach: int = 3
-    """Along a scan line, the next this many pulses are neighbours (bridges dropped returns)."""
-    rotation_reach: int = 2
-    """The next this many scan lines hold neighbours (bridges a scan line that missed)."""
-    phase_reach: int = 4
-    """On those scan lines, pulses up to this many phases either side are neighbours, so a thin
-    pipe or a beam edge whose hit drifts with the vehicle's vibration stays connected."""
-    fragment_points: int = 10
-    """Components of fewer points are fragments: the scattered hits of a thin pipe, a pole's
-    far side or a diagonal that the scan lines cross only here and there."""
-    fragment_reach_m: float = 0.3
-    """A fragment joins the larger component that comes closest to it within this many metres
-    (0: fragments stay apart, as in the paper)."""
-    slice_length_m: float = 0.5
-    """Section planes perpendicular to the trajectory cut components every this many metres
-    (the paper's 0.5 m)."""
-    max_width_m: float = 1.0
-    """A slice wider than this across the trajectory holds things side by side that something
-    joins (a median's two rails and the hedge between them; a rail against a bush): it is cut
-    where its points thin out across the trajectory (see ``valley_share``). 0 turns this off.
-    A guardrail's slice, posts included, is at most about 0.5 m wide."""
-    width_bin_m: float = 0.1
-    """Metres. Bins of the lateral offset in which a wide slice's density is measured."""
-    valley_share: float = 0.1
-    """A bin holding at most this share of the fullest bin's points is a valley bin."""
-    min_valley_m: float = 0.3
-    """Metres. A wide slice is cut on both sides of every run of valley bins at least this wide
-    (each such run is a piece of its own); narrower thin stretches (a post behind its rail,
-    the dip between a beam's ridges) do not cut."""
+    link_distance_m: float = param(
+        0.3, unit="m", gt=0, le=10, doc="lattice neighbours closer than this are joined"
+    )
+    along_reach: int = param(
+        3,
+        ge=1,
+        le=100,
+        doc="along a scan line, the next this many pulses are neighbours (bridges dropped returns)",
+    )
+    rotation_reach: int = param(
+        2,
+        ge=0,
+        le=100,
+        doc="the next this many scan lines hold neighbours (bridges a scan line that missed)",
+    )
+    phase_reach: int = param(
+        4,
+        ge=0,
+        le=1000,
+        doc="on those scan lines, pulses up to this many phases either side are neighbours, so "
+        "a thin pipe or a beam edge whose hit drifts with the vehicle's vibration stays "
+        "connected",
+    )
+    fragment_points: int = param(
+        10,
+        ge=1,
+        le=1_000_000,
+        doc="components of fewer points are fragments: the scattered hits of a thin pipe, a "
+        "pole's far side or a diagonal that the scan lines cross only here and there",
+    )
+    fragment_reach_m: float = param(
+        0.3,
+        unit="m",
+        ge=0,
+        le=10,
+        doc="a fragment joins the larger component that comes closest to it within this reach "
+        "(0: fragments stay apart, as in the paper)",
+    )
+    slice_length_m: float = param(
+        0.5,
+        unit="m",
+        gt=0,
+        le=100,
+        doc="section planes perpendicular to the trajectory cut components every this many "
+        "metres (the paper's 0.5 m)",
+    )
+    max_width_m: float = param(
+        1.0,
+        unit="m",
+        ge=0,
+        le=100,
+        doc="a slice wider than this across the trajectory holds things side by side that "
+        "something joins (a median's two rails and the hedge between them; a rail against a "
+        "bush): it is cut where its points thin out across the trajectory (see valley_share); "
+        "0 turns this off. A guardrail's slice, posts included, is at most about 0.5 m wide",
+    )
+    width_bin_m: float = param(
+        0.1,
+        unit="m",
+        gt=0,
+        le=10,
+        doc="bins of the lateral offset in which a wide slice's density is measured",
+    )
+    valley_share: float = param(
+        0.1,
+        ge=0,
+        le=1,
+        doc="a bin holding at most this share of the fullest bin's points is a valley bin",
+    )
+    min_valley_m: float = param(
+        0.3,
+        unit="m",
+        ge=0,
+        le=100,
+        doc="a wide slice is cut on both sides of every run of valley bins at least this wide "
+        "(each such run is a piece of its own); narrower thin stretches (a post behind its "
+        "rail, the dip between a beam's ridges) do not cut",
+    )
 
 
 @dataclass(frozen=True)
@@ -296,23 +347,9 @@ def _lateral_pieces(segment: np.ndarray, lateral: np.ndarray, params: SegmentPar
         return np.cumsum(start) - 1
 
     run = runs(valley)
-    valley &= np.bincount(run)[run] * params.width_bin_m >= params.min_valley_m - 1e-9
+    valley &= np.bincount(run)[run] * params.width_bin_m >= params.min_valley_m - _ROUNDING_M
     run = runs(valley)
     piece[members] = (run - run[first_bin[owner]])[cell]
-    return piece
-    members = np.flatnonzero(np.isin(segment, wide))
-    order = members[np.argsort(segment[members], kind="stable")]
-    bounds = np.searchsorted(segment[order], np.concatenate([wide, [n_seg]]))
-    for k, s in enumerate(wide):  # per wide slice (few: most slices are narrow)
-        idx = order[bounds[k] : bounds[k + 1]]
-        b = ((lateral[idx] - low[s]) / params.width_bin_m).astype(np.int64)
-        counts = np.bincount(b)
-        valley = counts <= params.valley_share * counts.max()
-        run = np.concatenate([[0], np.cumsum(valley[1:] != valley[:-1])])
-        too_narrow = np.bincount(run)[run] * params.width_bin_m < params.min_valley_m - 1e-9
-        valley &= ~too_narrow
-        run = np.concatenate([[0], np.cumsum(valley[1:] != valley[:-1])])
-        piece[idx] = run[b]
     return piece
 
 

@@ -55,6 +55,7 @@ SEGMENT_FEATURE_DIM = len(SEGMENT_FEATURE_NAMES)
 
 _BIN_M = 0.05  # coverage bins along the road and in height (metres)
 _INTENSITY_SCALE = 65535.0  # LAS intensity is uint16
+_MAX_SLOPE = 10.0  # a component's lateral drift per metre along the road is clipped to this
 
 
 def shape_features(
@@ -172,7 +173,7 @@ def shape_features(
         c_hmin[comp_index],
         c_hmax[comp_index],
         residual[comp_index],
-        np.minimum(np.abs(slope), 10.0)[comp_index],
+        np.minimum(np.abs(slope), _MAX_SLOPE)[comp_index],
     ]
     out[:] = np.stack(columns, axis=1)
     return np.nan_to_num(out, nan=0.0, posinf=0.0, neginf=0.0)

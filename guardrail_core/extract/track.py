@@ -12,7 +12,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from guardrail_core.errors import InvalidOptionError
-from guardrail_core.trajectory import Trajectory
+from guardrail_core.sensors.trajectory import Trajectory
+
+#: Trajectory samples closer than this to the previous one are the vehicle standing still.
+_MIN_STEP_M = 1e-6
+#: Newton steps divide by the bend factor ``1 - curvature * lateral``; a point near or beyond the
+#: centre of curvature (a factor near 0 or below) takes at most 5 times its tangential offset.
+_MIN_BEND = 0.2
 
 
 @dataclass(frozen=True)
@@ -43,7 +49,7 @@ def _path(
     xy = trajectory.position[:, :2]
     step = np.linalg.norm(np.diff(xy, axis=0), axis=1)
     sample_arc = np.concatenate([[0.0], np.cumsum(step)])
-    keep = np.concatenate([[True], step > 1e-6])
+    keep = np.concatenate([[True], step > _MIN_STEP_M])
     road = trajectory.position[keep, 2] - trajectory.reference_height_m
     if keep.sum() < 2:
         # A vehicle that never moved: a straight path along its heading.
@@ -100,7 +106,7 @@ def track_coordinates(
         # fast as the point's tangential offset.
         lateral = tx * (y - foot_y) - ty * (x - foot_x)
         bend = 1.0 - np.interp(np.clip(station, arc[0], arc[-1]), arc, curvature) * lateral
-        station = station + ((x - foot_x) * tx + (y - foot_y) * ty) / np.maximum(bend, 0.2)
+        station = station + ((x - foot_x) * tx + (y - foot_y) * ty) / np.maximum(bend, _MIN_BEND)
     foot_x, foot_y, tx, ty = _at(station, arc, path_xy, tangent)
     lateral = tx * (y - foot_y) - ty * (x - foot_x)
     height = xyz[:, 2] - np.interp(station, arc, road)

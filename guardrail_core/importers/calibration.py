@@ -29,9 +29,9 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from guardrail_core.camera_model import Camera
 from guardrail_core.errors import MissingSourceFileError, SourceFormatError
-from guardrail_core.geometry import make_transform, rotation_from_euler
+from guardrail_core.geom.frames import make_transform, rotation_from_euler
+from guardrail_core.sensors.camera import Camera
 
 #: Camera names become folder names under ``images/``.
 CAMERA_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")

@@ -32,24 +32,23 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from guardrail_core.camera_model import Camera
-from guardrail_core.drive import (
-    ImageRecord,
-    PointCloud,
-    atomic_folder,
-    commit_folder,
-    write_drive_files,
-)
 from guardrail_core.errors import (
     FrameRangeError,
     MissingCalibrationError,
     MissingSourceFileError,
     SourceFormatError,
 )
-from guardrail_core.geometry import euler_from_rotation, invert_transform, make_transform
+from guardrail_core.formats.atomic import check_output, staged_folder
+from guardrail_core.formats.drive import (
+    ImageRecord,
+    PointCloud,
+    write_drive_files,
+)
+from guardrail_core.geom.frames import euler_from_rotation, invert_transform, make_transform
 from guardrail_core.importers.calibration import require_file
-from guardrail_core.scanner_model import AZIMUTH_BINS, MULTIBEAM, ScannerParams, azimuth_phase
-from guardrail_core.trajectory import Trajectory
+from guardrail_core.sensors.camera import Camera
+from guardrail_core.sensors.scanner import AZIMUTH_BINS, MULTIBEAM, ScannerParams, azimuth_phase
+from guardrail_core.sensors.trajectory import Trajectory
 
 #: Height of the Velodyne above the road on the KITTI car (Geiger et al. 2013, Fig. 3).
 KITTI_SENSOR_HEIGHT_M = 1.73
@@ -152,6 +151,14 @@ def _read_rows(path: Path, what: str, columns: int) -> np.ndarray:
     if not np.all(np.isfinite(data)):
         raise SourceFormatError(f"{path}: contains NaN or infinity")
     return data
+
+
+def sequence_parts(root: str | os.PathLike) -> list[Path]:
+    """The files and folders of a sequence that :func:`import_kitti` reads: the inputs its
+    output must never be, hold or replace (the sequence folder itself may hold the output)."""
+    root = Path(root)
+    names = ("calib.txt", "poses.txt", "times.txt", "velodyne", CAMERA_NAME)
+    return [root / name for name in names]
 
 
 def read_sequence(root: str | os.PathLike) -> KittiSequence:
@@ -312,7 +319,15 @@ def import_kitti(
     ------
     MissingSourceFileError, SourceFormatError, MissingCalibrationError, FrameRangeError
         The message names the file or frame.
+    OutputExistsError
+        ``out`` is not empty and ``overwrite`` is False.
+    InputInsideOutputError
+        ``out`` is, holds or would replace a part of the sequence (``out`` may lie inside the
+        sequence folder, beside its files); raised before anything is read.
     """
+    out = Path(out)
+    inputs = sequence_parts(sequence_dir)
+    check_output(out, folder=True, overwrite=overwrite, inputs=inputs)
     sequence = read_sequence(sequence_dir)
     if frames is None:
         found = sorted(
@@ -371,9 +386,9 @@ def import_kitti(
     points = PointCloud(xyz, gps_time, intensity, rotation, phase)
     trajectory = _trajectory(sequence, chosen, sensor_height_m, T_drive_sequence)
     scanner = ScannerParams(
-        rotations_per_second=ROTATIONS_PER_SECOND,
-        measurements_per_second=ROTATIONS_PER_SECOND * AZIMUTH_BINS,
-        t0=float(sequence.times[0]),
+        rotation_rate_hz=ROTATIONS_PER_SECOND,
+        measurement_rate_hz=ROTATIONS_PER_SECOND * AZIMUTH_BINS,
+        t0_s=float(sequence.times[0]),
         range_noise_m=0.02,
         min_range_m=0.0,
         max_range_m=120.0,
@@ -382,9 +397,7 @@ def import_kitti(
         rings=rings,
     )
 
-    out = Path(out)
-    with atomic_folder(out, overwrite=overwrite) as staging_name:
-        staging = Path(staging_name)
+    with staged_folder(out, overwrite=overwrite, inputs=inputs) as staging:
         cameras, images = _copy_images(sequence, chosen, sensor, staging)
         write_drive_files(
             staging,
@@ -405,7 +418,6 @@ def import_kitti(
                 "time": "seconds of the sequence's times.txt; every point has its frame's time",
             },
         )
-        commit_folder(staging, out)
     return KittiImport(out, chosen, len(points), len(images), rings)
 
 

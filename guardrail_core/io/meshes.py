@@ -13,7 +13,6 @@ sub-millimetre precision.
 from __future__ import annotations
 
 import json
-import os
 import struct
 from collections.abc import Iterable, Mapping
 from pathlib import Path
@@ -42,15 +41,13 @@ def empty_glb() -> bytes:
     )
 
 
-def _write_atomic(path: Path, data: object) -> None:
-    """Write exported ``data`` (bytes or text) to ``path`` through a temporary sibling."""
-    tmp = path.with_name(f".{path.name}.tmp")
+def _write(path: Path, data: object) -> None:
+    """Write what a trimesh exporter returned (bytes, or text as UTF-8)."""
     if isinstance(data, str):
         data = data.encode("utf-8")
     if not isinstance(data, bytes):
         raise TypeError(f"an exporter returned {type(data).__name__}, not bytes or text")
-    tmp.write_bytes(data)
-    os.replace(tmp, path)
+    path.write_bytes(data)
 
 
 def write_meshes(
@@ -63,7 +60,10 @@ def write_meshes(
     Parameters
     ----------
     folder : Path
-        Created if missing; existing files of the same names are replaced.
+        Created if missing; existing files of the same names are replaced. The files are
+        written plainly: the caller writes into a staging folder
+        (:func:`guardrail_core.formats.atomic.staged_folder`, as the reconstruction does), which
+        makes the whole appear at once.
     meshes : {run id: trimesh.Trimesh}
         World-frame meshes, local coordinates in metres
         (:func:`guardrail_core.reconstruct.assemble.run_mesh`). Runs with an empty mesh are
@@ -91,11 +91,11 @@ def write_meshes(
         stem = run_file_stem(run_id)
         for fmt in formats:
             name = f"{stem}.{fmt}"
-            _write_atomic(folder / name, mesh.export(file_type=fmt))
+            _write(folder / name, mesh.export(file_type=fmt))
             written.append(name)
         scene.add_geometry(mesh, node_name=stem, geom_name=stem)
     if "glb" in formats:
         data = scene.export(file_type="glb") if scene.geometry else empty_glb()
-        _write_atomic(folder / SCENE_FILE, data)
+        _write(folder / SCENE_FILE, data)
         written.append(SCENE_FILE)
     return written

@@ -16,7 +16,7 @@ import numpy as np
 import trimesh
 
 from guardrail_core.errors import ReconstructionError
-from guardrail_core.mesh import Mesh, cylinder, dome, outward, plate
+from guardrail_core.geom.mesh import Mesh, cylinder, dome, outward, plate
 from guardrail_core.reconstruct.model import Pole, RunModel, UnitModel
 from guardrail_core.reconstruct.sweep import (
     SweepParams,
@@ -95,7 +95,9 @@ def _copied_units(run: RunModel, model: UnitModel, params: SweepParams) -> trime
     )
 
 
-def beam_path(positions: np.ndarray, min_mitre_cos: float = 0.3) -> tuple[np.ndarray, np.ndarray]:
+def beam_path(
+    positions: np.ndarray, min_mitre_cos: float = SweepParams.min_mitre_cos
+) -> tuple[np.ndarray, np.ndarray]:
     """The horizontal across-directions of a beam swept through pole ground points.
 
     Parameters
@@ -134,7 +136,7 @@ def _swept_beam(
     across, _ = beam_path(positions, params.min_mitre_cos)
     up = np.broadcast_to(UP, positions.shape)
     try:
-        mesh = plate(section, params.beam_thickness, positions, across, up, caps=params.caps)
+        mesh = plate(section, params.beam_thickness_m, positions, across, up, caps=params.caps)
     except ValueError as exc:
         raise ReconstructionError(f"run {run.run_id}: beam cannot be swept: {exc}") from exc
     return to_trimesh([mesh], params.rail_color)

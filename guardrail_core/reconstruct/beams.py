@@ -11,131 +11,209 @@ slices, joined into a polyline and smoothed by Taubin's low-pass filter (:func:`
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
 from guardrail_core.errors import ReconstructionError
+from guardrail_core.params import StageParams, param
 from guardrail_core.reconstruct.pipes import check_unit_points
-from guardrail_core.reconstruct.smoothing import check_taubin_params, taubin_smooth
-
-#: Metres. Past a crest, the flank's valley is where z has risen this much above its lowest;
-#: climbing to a crest, a fall of this much below the highest z so far ends the climb.
-VALLEY_RISE_M = 0.005
+from guardrail_core.reconstruct.smoothing import taubin_smooth
 
 __all__ = ["BeamParams", "BeamReconstruction", "reconstruct_beam", "unit_type"]
 
 
 @dataclass(frozen=True)
-class BeamParams:
-    """Thresholds of beam detection and section extraction (§4.4). Lengths in metres.
+class BeamParams(StageParams):
+    """Thresholds of beam detection and section extraction (§4.4)."""
 
-    Attributes
-    ----------
-    cell : float, m
-        Cell size of the occupancy grid of :func:`unit_type` (x and y).
-    band : float, m
-        Height of the band of rows whose points count for a row's occupancy: single-unit scans
-        of a beam are slanted stripes ~0.1 m apart, a band of rows spreads them over x, while
-        the balusters of a pipe fence stay at fixed x.
-    row_share : float in (0, 1]
-        A row is occupied when this share of its x cells holds points (within its band).
-    filled_share : float in (0, 1]
-        A region of occupied rows is "filled by points" when the mean occupancy of its rows
-        reaches this share.
-    min_height : float, m
-        Least height of a filled region for the unit to be a beam ("relatively large").
-    max_gap : float, m
-        Rows below ``row_share`` over at most this height (shadowed corrugation valleys) do not
-        break a region.
-    type_margin : float, m
-        :func:`unit_type` ignores points within this x distance of the poles (it knows no pole
-        radius; beam posts are ~0.07 m in radius).
-    max_open_share : float in [0, 1)
-        A beam covers every x between its posts: when more than this share of the ``cell / 2``
-        wide x bins between the margins hold no point (in the middle half of the heights), the
-        unit is a pipe fence (vertical pipes
-        at fixed x, however dense the superimposed points make its rows look).
-    pole_margin : float, m
-        :func:`reconstruct_beam` drops points within ``pole_radius + pole_margin`` in x of a pole.
-    post_gap : float, m
-        Points more than this behind (lower z than) the beam's rear-most slice centre are post or
-        blockout points and are dropped.
-    slice_interval : float, m
-        Height of the horizontal slices (§4.4: 10 mm).
-    min_points : int
-        Fewest points for a slice to give a centre.
-    shadow_gap : float, m
-        A step in y between consecutive section vertices above this is a shadowed stretch.
-    sparse_share : float in [0, 1)
-        Slices with fewer points than this share of the median slice are left out (grazing
-        views at the edge of a shadow, whose centres are biased).
-    min_x_spread : float in [0, 1)
-        A beam runs the whole unit: slices whose points span (10th to 90th percentile of x)
-        less than this share of the length between the posts are a blockout, a post top or
-        clutter, and are left out.
-    max_band_gap : float, m
-        The beam is one band of heights: slices separated from the band holding the most points
-        by a gap in y above this are left out (clutter at the foot, on a sparse scan).
-    fill_shadowed : bool
-        Fill the shadowed downward-facing flank below a ridge (the scanner looks down on the
-        beam and cannot see it) with the mirror image of the ridge's upper flank about its
-        crest; also below the lowest vertex when the section stops near a crest. Assumes the
-        symmetric ridges of standard W and thrie beams; False bridges gaps straight.
-    crest_depth : float, m
-        The height of a crest, the mirror's axis, is fitted to the slice centres of its ridge
-        within this depth (z) of the highest: the ridge's rounded top.
-    taubin_lambda, taubin_mu : float
-        Taubin's filter factors.
-    taubin_iterations : int
-        Taubin's filter iterations.
-    """
+    renamed: ClassVar[Mapping[str, str]] = {
+        "cell": "cell_m",
+        "band": "band_m",
+        "min_height": "min_height_m",
+        "max_gap": "max_gap_m",
+        "type_margin": "type_margin_m",
+        "pole_margin": "pole_margin_m",
+        "post_gap": "post_gap_m",
+        "slice_interval": "slice_interval_m",
+        "shadow_gap": "shadow_gap_m",
+        "max_band_gap": "max_band_gap_m",
+        "crest_depth": "crest_depth_m",
+    }
 
-    cell: float = 0.02
-    band: float = 0.06
-    row_share: float = 0.4
-    filled_share: float = 0.5
-    min_height: float = 0.2
-    max_gap: float = 0.08
-    type_margin: float = 0.2
-    max_open_share: float = 0.1
-    pole_margin: float = 0.05
-    post_gap: float = 0.03
-    slice_interval: float = 0.01
-    min_points: int = 3
-    shadow_gap: float = 0.02
-    sparse_share: float = 0.05
-    min_x_spread: float = 0.2
-    max_band_gap: float = 0.1
-    fill_shadowed: bool = True
-    crest_depth: float = 0.015
-    taubin_lambda: float = 0.5
-    taubin_mu: float = -0.53
-    taubin_iterations: int = 5
+    # -- unit type: beams fill a relatively large rectangle (§4.4) --------------------------------
+    cell_m: float = param(
+        0.02,
+        unit="m",
+        gt=0,
+        le=0.5,
+        doc="Cell size of the occupancy grid of :func:`unit_type` (x and y).",
+    )
+    band_m: float = param(
+        0.06,
+        unit="m",
+        gt=0,
+        le=1.0,
+        doc="Height of the band of rows whose points count for a row's occupancy: single-unit "
+        "scans of a beam are slanted stripes ~0.1 m apart, a band of rows spreads them over "
+        "x, while the balusters of a pipe fence stay at fixed x.",
+    )
+    row_share: float = param(
+        0.4,
+        gt=0,
+        le=1,
+        doc="A row is occupied when this share of its x cells holds points (within its band).",
+    )
+    filled_share: float = param(
+        0.5,
+        gt=0,
+        le=1,
+        doc='A region of occupied rows is "filled by points" when the mean occupancy of its rows '
+        "reaches this share.",
+    )
+    min_height_m: float = param(
+        0.2,
+        unit="m",
+        gt=0,
+        le=2.0,
+        doc='Least height of a filled region for the unit to be a beam ("relatively large").',
+    )
+    max_gap_m: float = param(
+        0.08,
+        unit="m",
+        ge=0,
+        le=1.0,
+        doc="Rows below ``row_share`` over at most this height (shadowed corrugation valleys) do "
+        "not break a region.",
+    )
+    type_margin_m: float = param(
+        0.2,
+        unit="m",
+        ge=0,
+        le=2.0,
+        doc=":func:`unit_type` ignores points within this x distance of the poles (it knows no "
+        "pole radius; beam posts are ~0.07 m in radius).",
+    )
+    max_open_share: float = param(
+        0.1,
+        ge=0,
+        lt=1,
+        doc="A beam covers every x between its posts: when more than this share of the ``cell_m / "
+        "2`` wide x bins between the margins hold no point (in the middle "
+        "``open_height_share`` of the heights), the unit is a pipe fence (vertical pipes at "
+        "fixed x, however dense the superimposed points make its rows look).",
+    )
+    open_height_share: float = param(
+        0.5,
+        gt=0,
+        le=1,
+        doc="The share of the unit's heights, around their median, whose points tell an open "
+        "fence from a beam (rails above and below would cover every x).",
+    )
+    # -- the section curve: 10 mm slices, smoothed (§4.4) ----------------------------------------
+    pole_margin_m: float = param(
+        0.05,
+        unit="m",
+        ge=0,
+        le=1.0,
+        doc=":func:`reconstruct_beam` drops points within ``pole_radius + pole_margin_m`` in x of "
+        "a pole.",
+    )
+    post_gap_m: float = param(
+        0.03,
+        unit="m",
+        ge=0,
+        le=1.0,
+        doc="Points more than this behind (lower z than) the beam's rear-most slice centre are "
+        "post or blockout points and are dropped.",
+    )
+    slice_interval_m: float = param(
+        0.01, unit="m", gt=0, le=0.2, doc="Height of the horizontal slices (§4.4: 10 mm)."
+    )
+    min_points: int = param(3, ge=1, doc="Points. Fewest points for a slice to give a centre.")
+    shadow_gap_m: float = param(
+        0.02,
+        unit="m",
+        ge=0,
+        le=1.0,
+        doc="A step in y between consecutive section vertices above this is a shadowed stretch.",
+    )
+    sparse_share: float = param(
+        0.05,
+        ge=0,
+        lt=1,
+        doc="Slices with fewer points than this share of the median slice are left out (grazing "
+        "views at the edge of a shadow, whose centres are biased).",
+    )
+    min_x_spread: float = param(
+        0.2,
+        ge=0,
+        lt=1,
+        doc="A beam runs the whole unit: slices whose points span (``x_spread_percentile`` to its "
+        "complement of x) less than this share of the length between the posts are a "
+        "blockout, a post top or clutter, and are left out.",
+    )
+    x_spread_percentile: float = param(
+        10.0,
+        ge=0,
+        lt=50,
+        doc="Percent. A slice's x span runs from this percentile of its points' x to 100 less it "
+        "(a stray point does not stretch it).",
+    )
+    max_band_gap_m: float = param(
+        0.1,
+        unit="m",
+        ge=0,
+        le=2.0,
+        doc="The beam is one band of heights: slices separated from the band holding the most "
+        "points by a gap in y above this are left out (clutter at the foot, on a sparse "
+        "scan).",
+    )
+    # -- shadowed flanks ---------------------------------------------------------------------------
+    fill_shadowed: bool = param(
+        True,
+        doc="Fill the shadowed downward-facing flank below a ridge (the scanner looks down on the "
+        "beam and cannot see it) with the mirror image of the ridge's upper flank about its "
+        "crest; also below the lowest vertex when the section stops near a crest. Assumes the "
+        "symmetric ridges of standard W and thrie beams; False bridges gaps straight.",
+    )
+    crest_depth_m: float = param(
+        0.015,
+        unit="m",
+        ge=0,
+        le=0.5,
+        doc="The height of a crest, the mirror's axis, is fitted to the slice centres of its "
+        "ridge within this depth (z) of the highest: the ridge's rounded top.",
+    )
+    crest_side_vertices: int = param(
+        2,
+        ge=1,
+        doc="Vertices. The parabola of a crest is its height only with at least this many of the "
+        "ridge's top vertices on each side of its vertex (an extrapolated top is no "
+        "measurement); else the highest vertex is.",
+    )
+    valley_rise_m: float = param(
+        0.005,
+        unit="m",
+        ge=0,
+        le=0.1,
+        doc="Past a crest, the flank's valley is where z has risen this much above its lowest; "
+        "climbing to a crest, a fall of this much below the highest z so far ends the climb "
+        "(the slices' noise does not).",
+    )
+    # -- Taubin's low-pass filter ------------------------------------------------------------------
+    taubin_lambda: float = param(0.5, gt=0, lt=1, doc="Taubin's shrinking factor.")
+    taubin_mu: float = param(-0.53, lt=0, doc="Taubin's inflating factor, below -taubin_lambda.")
+    taubin_iterations: int = param(5, ge=0, doc="Taubin's filter iterations.")
 
-    def __post_init__(self) -> None:
-        for name in ("cell", "band", "min_height", "slice_interval"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v > 0):
-                raise ReconstructionError(f"BeamParams.{name} must be > 0, got {v}")
-        lengths = ("max_gap", "type_margin", "pole_margin", "post_gap", "shadow_gap", "crest_depth")
-        for name in (*lengths, "max_band_gap"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v >= 0):
-                raise ReconstructionError(f"BeamParams.{name} must be >= 0, got {v}")
-        for name in ("sparse_share", "min_x_spread"):
-            v = getattr(self, name)
-            if not 0.0 <= v < 1.0:
-                raise ReconstructionError(f"BeamParams.{name} must be in [0, 1), got {v}")
-        for name in ("row_share", "filled_share"):
-            v = getattr(self, name)
-            if not 0.0 < v <= 1.0:
-                raise ReconstructionError(f"BeamParams.{name} must be in (0, 1], got {v}")
-        check_taubin_params(
-            "BeamParams", self.taubin_lambda, self.taubin_mu, self.taubin_iterations
-        )
-        if self.min_points < 1:
-            raise ReconstructionError(f"BeamParams.min_points must be >= 1, got {self.min_points}")
+    def check_relations(self) -> None:
+        if not self.taubin_mu < -self.taubin_lambda:
+            self.fail(
+                f"taubin_mu must be below -taubin_lambda = {-self.taubin_lambda} (Taubin's filter "
+                f"shrinks otherwise), got {self.taubin_mu}"
+            )
 
 
 @dataclass(frozen=True)
@@ -169,19 +247,19 @@ def _filled_height(points: np.ndarray, length: float, params: BeamParams) -> flo
     """Height (m) of the tallest region of rows filled by points (see :class:`BeamParams`)."""
     p = params
     x, y = points[:, 0], points[:, 1]
-    keep = (x > p.type_margin) & (x < length - p.type_margin)
+    keep = (x > p.type_margin_m) & (x < length - p.type_margin_m)
     x, y = x[keep], y[keep]
     if len(x) == 0:
         return 0.0
-    nx = max(1, int(math.ceil((length - 2 * p.type_margin) / p.cell)))
-    ix = np.minimum(((x - p.type_margin) / p.cell).astype(np.int64), nx - 1)
+    nx = max(1, int(math.ceil((length - 2 * p.type_margin_m) / p.cell_m)))
+    ix = np.minimum(((x - p.type_margin_m) / p.cell_m).astype(np.int64), nx - 1)
     y0 = float(y.min())
-    iy = ((y - y0) / p.cell).astype(np.int64)
+    iy = ((y - y0) / p.cell_m).astype(np.int64)
     ny = int(iy.max()) + 1
     grid = np.zeros((ny, nx), dtype=bool)
     grid[iy, ix] = True
     # Occupancy of each row over its band of rows.
-    k = max(1, int(round(p.band / p.cell)))
+    k = max(1, int(round(p.band_m / p.cell_m)))
     cum = np.vstack([np.zeros((1, nx)), np.cumsum(grid, axis=0)])
     lo = np.clip(np.arange(ny) - k // 2, 0, ny)
     hi = np.clip(lo + k, 0, ny)
@@ -190,13 +268,13 @@ def _filled_height(points: np.ndarray, length: float, params: BeamParams) -> flo
     if len(occupied) == 0:
         return 0.0
     # Regions of occupied rows, bridging short gaps.
-    breaks = np.flatnonzero(np.diff(occupied) * p.cell > p.max_gap + p.cell)
+    breaks = np.flatnonzero(np.diff(occupied) * p.cell_m > p.max_gap_m + p.cell_m)
     starts = np.concatenate([[0], breaks + 1])
     ends = np.concatenate([breaks, [len(occupied) - 1]])
     best = 0.0
     for a, b in zip(occupied[starts], occupied[ends], strict=True):
         if occupancy[a : b + 1].mean() >= p.filled_share:
-            best = max(best, (b - a + 1) * p.cell)
+            best = max(best, (b - a + 1) * p.cell_m)
     return best
 
 
@@ -207,14 +285,14 @@ def unit_type(points: np.ndarray, length: float, params: BeamParams = BeamParams
     ----------
     points : (N, 3) float64, unit coordinates, metres
         Superimposed unit points (pole points may be included: points within
-        ``params.type_margin`` of the poles are ignored).
+        ``params.type_margin_m`` of the poles are ignored).
     length : float, metres
         Unit length.
     params : BeamParams
 
     Returns
     -------
-    "beam" when a region of at least ``min_height`` is filled by points, else "pipe".
+    "beam" when a region of at least ``min_height_m`` is filled by points, else "pipe".
 
     Raises
     ------
@@ -228,26 +306,28 @@ def unit_type(points: np.ndarray, length: float, params: BeamParams = BeamParams
     """
     pts = check_unit_points(points)
     length = _check_length(length)
-    if _filled_height(pts, length, params) < params.min_height:
+    if _filled_height(pts, length, params) < params.min_height_m:
         return "pipe"
     return "beam" if _open_share(pts, length, params) <= params.max_open_share else "pipe"
 
 
 def _open_share(points: np.ndarray, length: float, params: BeamParams) -> float:
-    """Share of the x bins (``cell / 2`` wide) between the margins that hold no point, among the
-    points of the middle half of the heights (rails above and below would cover every x)."""
+    """Share of the x bins (``cell_m / 2`` wide) between the margins that hold no point, among the
+    points of the middle ``open_height_share`` of the heights (rails above and below would cover
+    every x)."""
     p = params
-    inside = (points[:, 0] > p.type_margin) & (points[:, 0] < length - p.type_margin)
+    inside = (points[:, 0] > p.type_margin_m) & (points[:, 0] < length - p.type_margin_m)
     x, y = points[inside, 0], points[inside, 1]
     if len(y):
-        low, high = np.percentile(y, [25, 75])
+        half = 50 * p.open_height_share  # percent either side of the median
+        low, high = np.percentile(y, [50 - half, 50 + half])
         x = x[(y >= low) & (y <= high)]
-    width = p.cell / 2
-    n_bins = max(1, int(math.floor((length - 2 * p.type_margin) / width)))
+    width = p.cell_m / 2
+    n_bins = max(1, int(math.floor((length - 2 * p.type_margin_m) / width)))
     if len(x) == 0:
         return 1.0
     counts = np.bincount(
-        np.minimum(((x - p.type_margin) / width).astype(np.int64), n_bins - 1), minlength=n_bins
+        np.minimum(((x - p.type_margin_m) / width).astype(np.int64), n_bins - 1), minlength=n_bins
     )
     return float((counts == 0).mean())
 
@@ -299,7 +379,7 @@ def reconstruct_beam(
     p = params
     empty = np.zeros((0, 2))
     # §4.4: points on poles are eliminated.
-    x0 = pole_radius + p.pole_margin
+    x0 = pole_radius + p.pole_margin_m
     pts = pts[(pts[:, 0] > x0) & (pts[:, 0] < length - x0)]
     if len(pts) == 0:
         return BeamReconstruction(empty, 0, ("no points between the posts: no beam section",))
@@ -308,7 +388,7 @@ def reconstruct_beam(
     section, used = _slice_centres(pts, span, p)
     if len(section) >= 2:
         # Posts and blockouts stand behind the beam: drop points behind its rear-most centre.
-        front = pts[:, 2] >= section[:, 0].min() - p.post_gap
+        front = pts[:, 2] >= section[:, 0].min() - p.post_gap_m
         if not front.all():
             pts = pts[front]
             section, used = _slice_centres(pts, span, p)
@@ -318,7 +398,7 @@ def reconstruct_beam(
             f"only {len(section)} horizontal slices hold {p.min_points}+ points: no beam section"
         )
         return BeamReconstruction(empty, int(used), tuple(notes))
-    gaps = np.flatnonzero(np.diff(section[:, 1]) > p.shadow_gap)
+    gaps = np.flatnonzero(np.diff(section[:, 1]) > p.shadow_gap_m)
     if len(gaps):
         spans = ", ".join(f"{section[g, 1]:.2f}-{section[g + 1, 1]:.2f} m" for g in gaps)
         how = "mirrored from the ridges' upper flanks" if p.fill_shadowed else "bridged straight"
@@ -337,11 +417,11 @@ def _slice_centres(pts: np.ndarray, span: float, p: BeamParams) -> tuple[np.ndar
 
     A slice is part of the beam when it holds ``min_points`` points and ``sparse_share`` of the
     median slice, its points span ``min_x_spread`` of ``span`` (metres between the posts), and
-    it lies in the band of such slices, joined across gaps up to ``max_band_gap``, that holds the
+    it lies in the band of such slices, joined across gaps up to ``max_band_gap_m``, that holds the
     most points.
     """
     y0 = float(pts[:, 1].min())
-    s = ((pts[:, 1] - y0) / p.slice_interval).astype(np.int64)
+    s = ((pts[:, 1] - y0) / p.slice_interval_m).astype(np.int64)
     order = np.argsort(s, kind="stable")
     s_sorted = s[order]
     bounds = np.flatnonzero(np.diff(s_sorted)) + 1
@@ -349,14 +429,15 @@ def _slice_centres(pts: np.ndarray, span: float, p: BeamParams) -> tuple[np.ndar
     counts = np.array([len(g) for g in groups])
     # Slices with few points are the edge of a shadow (a grazing view): left out.
     ok = counts >= max(p.min_points, p.sparse_share * float(np.median(counts)))
-    spread = np.array([np.ptp(np.percentile(pts[g, 0], [10, 90])) for g in groups])
+    q = [p.x_spread_percentile, 100 - p.x_spread_percentile]
+    spread = np.array([np.ptp(np.percentile(pts[g, 0], q)) for g in groups])
     ok &= spread >= p.min_x_spread * span
     if not ok.any():
         return np.zeros((0, 2)), 0
     kept = np.flatnonzero(ok)
     level = s_sorted[bounds - 1] if len(bounds) else np.zeros(0, np.int64)
     level = np.concatenate([level, [s_sorted[-1]]])[kept]
-    band = np.concatenate([[0], np.cumsum(np.diff(level) * p.slice_interval > p.max_band_gap)])
+    band = np.concatenate([[0], np.cumsum(np.diff(level) * p.slice_interval_m > p.max_band_gap_m)])
     main = int(np.argmax(np.bincount(band, weights=counts[kept])))
     kept = kept[band == main]
     z = np.array([np.median(pts[groups[k], 2]) for k in kept])
@@ -367,7 +448,7 @@ def _slice_centres(pts: np.ndarray, span: float, p: BeamParams) -> tuple[np.ndar
 def _fill_shadowed(section: np.ndarray, p: BeamParams) -> np.ndarray:
     """Fill shadowed lower flanks of ridges by mirroring the upper flank about the crest.
 
-    section : (M, 2) (z, y) from bottom to top. A gap (a step in y above ``shadow_gap``) whose
+    section : (M, 2) (z, y) from bottom to top. A gap (a step in y above ``shadow_gap_m``) whose
     upper side climbs to a crest (a local maximum of z) is filled with the crest's upper flank
     mirrored about the crest height; so is the stretch below the lowest vertex when that vertex
     lies in the upper half of the section's depth (the plate cannot end at a ridge). Crest
@@ -385,19 +466,19 @@ def _fill_shadowed(section: np.ndarray, p: BeamParams) -> np.ndarray:
         # upper flank, the plate's edge.
         return m[(m[:, 1] >= lo) & (m[:, 1] < hi)]
 
-    for g in np.flatnonzero(np.diff(y) > p.shadow_gap):
-        c = _crest_above(z, int(g) + 1)
+    for g in np.flatnonzero(np.diff(y) > p.shadow_gap_m):
+        c = _crest_above(z, int(g) + 1, p)
         if c > g + 1 or z[g + 1] > z_mid:
             pieces.append(mirrored(_crest_height(section, c, p), y[g], y[g + 1]))
     if z[0] > z_mid:
-        c = _crest_above(z, 0)
+        c = _crest_above(z, 0, p)
         axis = _crest_height(section, c, p)
         half_pitch = _half_pitch(section, c, axis, p)
         if half_pitch is None:
             # one ridge: mirror down to the next valley above the crest (where the upper flank
             # ends), the deepest vertex before z rises again by more than the slices' noise
             k = j = c
-            while j + 1 < len(z) and z[j + 1] <= z[k] + VALLEY_RISE_M:
+            while j + 1 < len(z) and z[j + 1] <= z[k] + p.valley_rise_m:
                 j += 1
                 k = j if z[j] < z[k] else k
             pieces.append(mirrored(axis, 2.0 * axis - y[k], y[0]))
@@ -408,17 +489,17 @@ def _fill_shadowed(section: np.ndarray, p: BeamParams) -> np.ndarray:
             edge = axis - half_pitch
             # the mirrored valley is the upper flank's end, sliced at a grazing view where the
             # next ridge's shadow begins (biased outward): the edge vertex replaces its last
-            fill = mirrored(axis, edge + 0.5 * p.slice_interval, y[0])
+            fill = mirrored(axis, edge + 0.5 * p.slice_interval_m, y[0])
             pieces.append(np.vstack([fill, [[float(z.min()), edge]]]))
     out = np.vstack(pieces)
     return out[np.argsort(out[:, 1], kind="stable")]
 
 
-def _crest_above(z: np.ndarray, i: int) -> int:
+def _crest_above(z: np.ndarray, i: int, p: BeamParams) -> int:
     """Index of the crest reached by climbing from vertex ``i``: the highest z before z falls
-    more than ``VALLEY_RISE_M`` below it (noise does not stop the climb)."""
+    more than ``valley_rise_m`` below it (noise does not stop the climb)."""
     best = j = i
-    while j + 1 < len(z) and z[j + 1] >= z[best] - VALLEY_RISE_M:
+    while j + 1 < len(z) and z[j + 1] >= z[best] - p.valley_rise_m:
         j += 1
         best = j if z[j] > z[best] else best
     return best
@@ -426,24 +507,25 @@ def _crest_above(z: np.ndarray, i: int) -> int:
 
 def _crest_height(section: np.ndarray, c: int, p: BeamParams) -> float:
     """Height y (m) of the crest at vertex ``c``: the vertex of a parabola z(y) fitted to the
-    ridge's top, the vertices within ``crest_depth`` of its highest z along the stretch around
+    ridge's top, the vertices within ``crest_depth_m`` of its highest z along the stretch around
     ``c`` that stays above mid-depth without a shadowed gap.
 
     The highest vertex alone is off by several mm on a sparse scan (the ridge is flat there,
     and a grazing slice at a shadow's edge can top it); the fit stays within 1-2 mm. Falls
-    back to the highest vertex unless the fit has a maximum with two vertices on each side.
+    back to the highest vertex unless the fit has a maximum with ``crest_side_vertices`` on each
+    side.
     """
     z, y = section[:, 0], section[:, 1]
     z_mid = 0.5 * (z.min() + z.max())
     lo = hi = c
-    while lo > 0 and z[lo - 1] > z_mid and y[lo] - y[lo - 1] <= p.shadow_gap:
+    while lo > 0 and z[lo - 1] > z_mid and y[lo] - y[lo - 1] <= p.shadow_gap_m:
         lo -= 1
-    while hi + 1 < len(z) and z[hi + 1] > z_mid and y[hi + 1] - y[hi] <= p.shadow_gap:
+    while hi + 1 < len(z) and z[hi + 1] > z_mid and y[hi + 1] - y[hi] <= p.shadow_gap_m:
         hi += 1
     ridge = np.arange(lo, hi + 1)
-    top = ridge[z[ridge] >= z[ridge].max() - p.crest_depth]
+    top = ridge[z[ridge] >= z[ridge].max() - p.crest_depth_m]
     highest = float(y[ridge[np.argmax(z[ridge])]])
-    if len(top) < 4:
+    if len(top) < 2 * p.crest_side_vertices:
         return highest
     a, b, _ = np.polyfit(y[top] - y[c], z[top], 2)
     if a >= 0:
@@ -451,7 +533,7 @@ def _crest_height(section: np.ndarray, c: int, p: BeamParams) -> float:
     vertex = y[c] - b / (2.0 * a)
     # an extrapolated top is no measurement: the fit must have vertices on both sides
     below = int((y[top] < vertex).sum())
-    return float(vertex) if min(below, len(top) - below) >= 2 else highest
+    return float(vertex) if min(below, len(top) - below) >= p.crest_side_vertices else highest
 
 
 def _half_pitch(section: np.ndarray, c: int, axis: float, p: BeamParams) -> float | None:
@@ -466,7 +548,7 @@ def _half_pitch(section: np.ndarray, c: int, axis: float, p: BeamParams) -> floa
         j += 1
     if j >= len(z):
         return None
-    k = _crest_above(z, j)
+    k = _crest_above(z, j, p)
     if k == len(z) - 1:
         return None  # the section stops on the way up: no whole crest
     return 0.5 * (_crest_height(section, k, p) - axis)

@@ -16,7 +16,6 @@ from __future__ import annotations
 import csv
 import io
 import json
-import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,6 +24,8 @@ from typing import Any
 import numpy as np
 
 from guardrail_core.errors import InvalidOptionError, ReconstructionError
+from guardrail_core.formats.atomic import atomic_write
+from guardrail_core.params import StageParams, param
 from guardrail_core.reconstruct.model import RunModel, UnitModel
 
 STATUSES = ("reconstructed", "poles only", "not reconstructed")
@@ -38,16 +39,17 @@ ROW_KEYS = (
 
 
 @dataclass(frozen=True)
-class InventoryParams:
-    """How runs are summarised.
+class InventoryParams(StageParams):
+    """How runs are summarised."""
 
-    Attributes
-    ----------
-    flat_pipe_m : float, metres: a pipe whose axis height varies less than this is written with
-        one height in the signature, else with its range
-    """
-
-    flat_pipe_m: float = 0.05
+    flat_pipe_m: float = param(
+        0.05,
+        unit="m",
+        ge=0,
+        le=1.0,
+        doc="A pipe whose axis height varies less than this is written with one height in the "
+        "signature, else with its range.",
+    )
 
 
 def _origin(origin: np.ndarray) -> np.ndarray:
@@ -217,14 +219,6 @@ def _float(value) -> float | None:
     return None if value is None else float(value)
 
 
-def _write_text_atomic(path: Path, text: str) -> None:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(text, encoding="utf-8", newline="")
-    os.replace(tmp, path)
-
-
 def inventory_geojson(
     rows: Sequence[dict], runs: Sequence[RunModel], origin: np.ndarray, crs: str
 ) -> dict:
@@ -265,9 +259,9 @@ def inventory_geojson(
 def write_inventory_geojson(
     path: Path, rows: Sequence[dict], runs: Sequence[RunModel], origin: np.ndarray, crs: str
 ) -> None:
-    """Write :func:`inventory_geojson` to ``path`` (through a temporary file and a rename)."""
+    """Write :func:`inventory_geojson` to ``path``, whole or not at all (:func:`atomic_write`)."""
     text = json.dumps(inventory_geojson(rows, runs, origin, crs), indent=1, allow_nan=False)
-    _write_text_atomic(Path(path), text + "\n")
+    atomic_write(path, text + "\n", overwrite=True)
 
 
 def _cell(value) -> str:
@@ -291,4 +285,4 @@ def write_inventory_csv(path: Path, rows: Sequence[dict]) -> None:
     writer.writerow(keys)
     for row in rows:
         writer.writerow([_cell(row.get(k)) for k in keys])
-    _write_text_atomic(Path(path), buffer.getvalue())
+    atomic_write(path, buffer.getvalue(), overwrite=True)

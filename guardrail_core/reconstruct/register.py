@@ -26,51 +26,89 @@ import numpy as np
 import open3d as o3d
 
 from guardrail_core.errors import ReconstructionError
+from guardrail_core.params import StageParams, param
 from guardrail_core.reconstruct.runs import check_points
 
 
 @dataclass(frozen=True)
-class RegisterParams:
+class RegisterParams(StageParams):
     """ICP of unit shapes onto each other."""
 
-    max_correspondence_m: float = 0.03
-    """Metres. ICP pairs a unit point with the nearest superimposed point within this; the
-    rough alignment is good to ~1 cm (pole axes ~2 mm, ground height ~5 mm)."""
-    max_iterations: int = 30
-    """ICP iterations per unit and pass."""
-    passes: int = 1
-    """Rounds over all units; each round registers every unit onto the others as the previous
-    round left them."""
-    min_fitness: float = 0.6
-    """Share of a unit's points with a partner within ``max_correspondence_m`` needed to accept
-    the correction (Open3D's fitness)."""
-    max_translation_m: float = 0.005
-    """Metres. A larger total correction of a pipe unit is rejected: ICP slid along the pipes.
-    The rough alignment is good to the poles' error (~2 mm on simulated drives); onto the
-    sparse superimposition of a few units, ICP moved units by 5-18 mm, and with fewer than 16
-    units that lost pipes (an arch's king post, verticals). Measured with the units sweep:
-    pipes found over 1-32 units 421/460 with 5 mm, 376/460 with 30 mm (same pipe code)."""
-    beam_max_translation_m: float = 0.005
-    """Metres. The same for beam units (``superimpose(..., beam=True)``), across the beam only
-    (y and z): a beam's section does not change along x, so the x part of a beam unit's
-    correction is dropped. Across, the scanner sees mostly the ridges' upper flanks, all of one
-    slope, and ICP slides units along them by 1-2 cm (a thrie beam's crests 18 mm low) where the
-    rough alignment was within 2 mm. Measured on the beam runs of three simulated drives (the
-    units sweep at 1-9 units and two random streets): section Hausdorff at most 7.8 mm with
-    5 mm, 34.7 mm with 3 cm (26.7 mm with 3 cm and x included, as before)."""
-    max_rotation_deg: float = 2.0
-    """Degrees. A larger total rotation is rejected."""
-    min_cost_gain: float = 0.0
-    """Relative. The correction must lower the unit's truncated mean squared distance to the
-    others (partners within ``max_correspondence_m``, the rest counted at that distance) by at
-    least this share. 0 (off): measured on simulated drives, gating at 5-20 % did not stop
-    ICP's small drift when the rough alignment is already at the pole-detection noise (~2 mm),
-    and marks well-aligned units as not registered."""
-    min_points: int = 20
-    """Points. Units with fewer are not registered (still superimposed at the rough alignment)."""
-    target_voxel_m: float = 0.01
-    """Metres. The superimposition of the other units is voxel-downsampled to this before ICP
-    (speed: 33 units of ~700 points in ~0.2 s; same sharpness as 4 mm)."""
+    max_correspondence_m: float = param(
+        0.03,
+        unit="m",
+        gt=0,
+        le=1.0,
+        doc="ICP pairs a unit point with the nearest superimposed point within this; the rough "
+        "alignment is good to ~1 cm (pole axes ~2 mm, ground height ~5 mm).",
+    )
+    max_iterations: int = param(30, ge=1, doc="ICP iterations per unit and pass.")
+    passes: int = param(
+        1,
+        ge=1,
+        doc="Rounds over all units; each round registers every unit onto the others as the "
+        "previous round left them.",
+    )
+    min_fitness: float = param(
+        0.6,
+        ge=0,
+        le=1,
+        doc="Share of a unit's points with a partner within ``max_correspondence_m`` needed to "
+        "accept the correction (Open3D's fitness).",
+    )
+    max_translation_m: float = param(
+        0.005,
+        unit="m",
+        ge=0,
+        le=1.0,
+        doc="A larger total correction of a pipe unit is rejected: ICP slid along the pipes. The "
+        "rough alignment is good to the poles' error (~2 mm on simulated drives); onto the "
+        "sparse superimposition of a few units, ICP moved units by 5-18 mm, and with fewer "
+        "than 16 units that lost pipes (an arch's king post, verticals). Measured with the "
+        "units sweep: pipes found over 1-32 units 421/460 with 5 mm, 376/460 with 30 mm (same "
+        "pipe code).",
+    )
+    beam_max_translation_m: float = param(
+        0.005,
+        unit="m",
+        ge=0,
+        le=1.0,
+        doc="The same for beam units (``superimpose(..., beam=True)``), across the beam only (y "
+        "and z): a beam's section does not change along x, so the x part of a beam unit's "
+        "correction is dropped. Across, the scanner sees mostly the ridges' upper flanks, all "
+        "of one slope, and ICP slides units along them by 1-2 cm (a thrie beam's crests 18 mm "
+        "low) where the rough alignment was within 2 mm. Measured on the beam runs of three "
+        "simulated drives (the units sweep at 1-9 units and two random streets): section "
+        "Hausdorff at most 7.8 mm with 5 mm, 34.7 mm with 3 cm (26.7 mm with 3 cm and x "
+        "included, as before).",
+    )
+    max_rotation_deg: float = param(
+        2.0, unit="deg", ge=0, le=180, doc="A larger total rotation is rejected."
+    )
+    min_cost_gain: float = param(
+        0.0,
+        ge=0,
+        le=1,
+        doc="Relative. The correction must lower the unit's truncated mean squared distance to "
+        "the others (partners within ``max_correspondence_m``, the rest counted at that "
+        "distance) by at least this share. 0 (off): measured on simulated drives, gating at "
+        "5-20 % did not stop ICP's small drift when the rough alignment is already at the "
+        "pole-detection noise (~2 mm), and marks well-aligned units as not registered.",
+    )
+    min_points: int = param(
+        20,
+        ge=1,
+        doc="Points. Units with fewer are not registered (still superimposed at the rough "
+        "alignment).",
+    )
+    target_voxel_m: float = param(
+        0.01,
+        unit="m",
+        gt=0,
+        le=1.0,
+        doc="The superimposition of the other units is voxel-downsampled to this before ICP "
+        "(speed: 33 units of ~700 points in ~0.2 s; same sharpness as 4 mm).",
+    )
 
 
 @dataclass(frozen=True)
@@ -133,8 +171,6 @@ def superimpose(
         raise ReconstructionError(
             f"reference must be a unit index below {n_units}, got {reference}"
         )
-    if params.max_correspondence_m <= 0 or params.max_iterations < 1:
-        raise ReconstructionError("max_correspondence_m must be > 0 and max_iterations >= 1")
     transforms = np.tile(np.eye(4), (n_units, 1, 1))
     registered = np.zeros(n_units, bool)
     fitness = np.full(n_units, np.nan)
@@ -148,7 +184,7 @@ def superimpose(
     )
     estimator = o3d.pipelines.registration.TransformationEstimationPointToPoint()
     if n_units > 1 and tryable.any():
-        for _ in range(max(params.passes, 1) if reference is None else 1):
+        for _ in range(params.passes if reference is None else 1):
             # §4.2: the current superimposition (previous pass), each unit onto the others.
             moved = [_apply(t, c) for t, c in zip(transforms, clouds, strict=True)]
             label = np.repeat(np.arange(n_units), sizes)

@@ -20,21 +20,53 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from guardrail_core.errors import ReconstructionError
+from guardrail_core.params import StageParams, param
 
 
 @dataclass(frozen=True)
-class RunParams:
-    """How guardrail points are grouped into runs."""
+class RunParams(StageParams):
+    """How guardrail points are grouped into runs, and which ground points a run takes."""
 
-    link_distance_m: float = 0.3
-    """Metres. Points closer than this are in the same run (measured between the centroids of
-    occupied voxels of a third of this size, so the effective distance is within about half a
-    voxel diagonal of it)."""
-    min_points: int = 100
-    """Points. A group with fewer points is not a run (its points get -1)."""
-    min_length_m: float = 1.5
-    """Metres. A group whose horizontal extent (the diagonal of its xy bounding box along its
-    principal direction) is shorter than this is not a run: shorter than one unit."""
+    link_distance_m: float = param(
+        0.3,
+        unit="m",
+        gt=0,
+        le=10.0,
+        doc="Points closer than this are in the same run (measured between the centroids of "
+        "occupied voxels of ``1 / voxels_per_link`` of this size, so the effective distance "
+        "is within about half a voxel diagonal of it).",
+    )
+    voxels_per_link: int = param(
+        3,
+        ge=1,
+        doc="The voxels whose centroids are linked are ``link_distance_m / voxels_per_link`` "
+        "wide: smaller ones follow the points more closely, larger ones are faster.",
+    )
+    min_points: int = param(
+        100, ge=1, doc="Points. A group with fewer points is not a run (its points get -1)."
+    )
+    min_length_m: float = param(
+        1.5,
+        unit="m",
+        ge=0,
+        le=100.0,
+        doc="A group whose horizontal extent (the diagonal of its xy bounding box along its "
+        "principal direction) is shorter than this is not a run: shorter than one unit.",
+    )
+    ground_reach_m: float = param(
+        1.0,
+        unit="m",
+        gt=0,
+        le=10.0,
+        doc="Ground points within this horizontal distance of a run's points are its ground "
+        "(where its poles stand); farther ones are not.",
+    )
+    ground_query_step: int = param(
+        10,
+        ge=1,
+        doc="Every this-many-th point of a run looks for ground points within ``ground_reach_m`` "
+        "(speed: neighbouring guardrail points have the same ground).",
+    )
 
 
 def check_points(xyz: np.ndarray, name: str = "xyz") -> np.ndarray:
@@ -70,14 +102,12 @@ def group_runs(xyz: np.ndarray, params: RunParams = RunParams()) -> np.ndarray:
     Matsumoto et al. 2019, §4.1 (a guardrail is subdivided run by run).
     """
     xyz = check_points(xyz)
-    if params.link_distance_m <= 0:
-        raise ReconstructionError(f"link_distance_m must be > 0, got {params.link_distance_m}")
     n = len(xyz)
     out = np.full(n, -1, np.int32)
     if n == 0:
         return out
     # Voxel-downsample: connectivity of occupied voxels (centroids) instead of points.
-    voxel = params.link_distance_m / 3.0
+    voxel = params.link_distance_m / params.voxels_per_link
     cell = np.floor((xyz - xyz.min(axis=0)) / voxel).astype(np.int64)
     dims = cell.max(axis=0) + 1
     key = (cell[:, 0] * dims[1] + cell[:, 1]) * dims[2] + cell[:, 2]

@@ -76,14 +76,3 @@ def taubin_smooth(
                 lap[-1] = p[-2] - p[-1]
             p = p + factor * lap
     return p
-
-
-def check_taubin_params(owner: str, lam: float, mu: float, iterations: int) -> None:
-    """Raise ReconstructionError unless 0 < lam < 1, mu < -lam and iterations >= 0 (Taubin's
-    filter shrinks otherwise); ``owner`` names the parameters in the message."""
-    if not 0.0 < lam < 1.0 or not mu < -lam:
-        raise ReconstructionError(
-            f"{owner} needs 0 < taubin_lambda < 1 and taubin_mu < -taubin_lambda, got {lam}, {mu}"
-        )
-    if iterations < 0:
-        raise ReconstructionError(f"{owner} needs taubin_iterations >= 0, got {iterations}")

@@ -10,59 +10,67 @@ pole, y above the ground line, z toward the road; metres.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 import trimesh
 
-from guardrail_core.errors import InvalidOptionError, ReconstructionError
-from guardrail_core.mesh import Mesh, plate, tube
+from guardrail_core.errors import ReconstructionError
+from guardrail_core.geom.mesh import Mesh, plate, tube
+from guardrail_core.params import StageParams, param
 from guardrail_core.reconstruct.model import Pipe, UnitModel
 
 UNIT_TYPES = ("pipe", "beam")
 
 
 @dataclass(frozen=True)
-class SweepParams:
-    """How unit and run models become meshes.
+class SweepParams(StageParams):
+    """How unit and run models become meshes."""
 
-    Attributes
-    ----------
-    tube_sections : int, segments of a pipe's circle (the simulator's 12)
-    pole_sections : int, segments of a pole's circle (the simulator's 16)
-    beam_thickness : float, metres: the display thickness of a beam plate (real beams: 3-4 mm)
-    caps : bool: close the ends of pipes and beam plates (each part is then watertight)
-    pole_cap : bool: a hemispherical dome on each pole, topping out at the pole's height
-    dome_rings : int, latitude rings of a pole's dome
-    min_mitre_cos : float: the cosine of half a bend below which a mitre stops stretching
-        (bends sharper than about 145° would otherwise spike)
-    rail_color, pole_color : RGBA uint8 vertex colours of pipes/beams and of poles
-    """
+    renamed: ClassVar[Mapping[str, str]] = {"beam_thickness": "beam_thickness_m"}
 
-    tube_sections: int = 12
-    pole_sections: int = 16
-    beam_thickness: float = 0.003
-    caps: bool = True
-    pole_cap: bool = True
-    dome_rings: int = 4
-    min_mitre_cos: float = 0.3
-    rail_color: tuple[int, int, int, int] = (225, 225, 215, 255)
-    pole_color: tuple[int, int, int, int] = (150, 150, 145, 255)
+    tube_sections: int = param(12, ge=3, doc="Segments of a pipe's circle (the simulator's 12).")
+    pole_sections: int = param(16, ge=3, doc="Segments of a pole's circle (the simulator's 16).")
+    beam_thickness_m: float = param(
+        0.003,
+        unit="m",
+        gt=0,
+        lt=0.1,
+        doc="The display thickness of a beam plate (real beams: 3-4 mm).",
+    )
+    caps: bool = param(
+        True, doc="Close the ends of pipes and beam plates (each part is then watertight)."
+    )
+    pole_cap: bool = param(
+        True, doc="A hemispherical dome on each pole, topping out at the pole's height."
+    )
+    dome_rings: int = param(4, ge=1, doc="Latitude rings of a pole's dome.")
+    min_mitre_cos: float = param(
+        0.3,
+        gt=0,
+        le=1,
+        doc="The cosine of half a bend below which a mitre stops stretching (bends sharper than "
+        "about 145° would otherwise spike).",
+    )
+    rail_color: tuple[int, int, int, int] = param(
+        (225, 225, 215, 255), doc="RGBA (0-255) vertex colour of pipes and beams."
+    )
+    pole_color: tuple[int, int, int, int] = param(
+        (150, 150, 145, 255), doc="RGBA (0-255) vertex colour of poles."
+    )
 
-    def __post_init__(self) -> None:
-        if self.tube_sections < 3 or self.pole_sections < 3:
-            raise InvalidOptionError(
-                f"tube_sections and pole_sections must be >= 3, got {self.tube_sections} and "
-                f"{self.pole_sections}"
-            )
-        if not 0 < self.beam_thickness < 0.1:
-            raise InvalidOptionError(
-                f"beam_thickness must be in (0, 0.1) m, got {self.beam_thickness}"
-            )
-        if self.dome_rings < 1:
-            raise InvalidOptionError(f"dome_rings must be >= 1, got {self.dome_rings}")
-        if not 0 < self.min_mitre_cos <= 1:
-            raise InvalidOptionError(f"min_mitre_cos must be in (0, 1], got {self.min_mitre_cos}")
+    def check_relations(self) -> None:
+        for name in ("rail_color", "pole_color"):
+            color = getattr(self, name)
+            if not (
+                isinstance(color, tuple)
+                and len(color) == 4
+                and all(isinstance(c, int) and not isinstance(c, bool) for c in color)
+                and all(0 <= c <= 255 for c in color)
+            ):
+                self.fail(f"{name} must be four integers 0-255 (RGBA), got {color!r}")
 
 
 def empty_mesh() -> trimesh.Trimesh:
@@ -146,7 +154,7 @@ def beam_mesh(section: np.ndarray, length: float, params: SweepParams = SweepPar
     across = np.broadcast_to([0.0, 0.0, 1.0], path.shape)  # section z -> unit z
     up = np.broadcast_to([0.0, 1.0, 0.0], path.shape)  # section y -> unit y
     try:
-        return plate(section, params.beam_thickness, path, across, up, caps=params.caps)
+        return plate(section, params.beam_thickness_m, path, across, up, caps=params.caps)
     except ValueError as exc:
         raise ReconstructionError(f"beam section cannot be swept: {exc}") from exc
 
@@ -158,7 +166,7 @@ def unit_mesh(model: UnitModel, params: SweepParams = SweepParams()) -> trimesh.
     ----------
     model : UnitModel
         Pipe type: every pipe swept as a tube. Beam type: ``model.section`` (M, 2) (z, y) swept
-        as a plate of ``params.beam_thickness`` along x in [0, ``model.length``]. A model with no
+        as a plate of ``params.beam_thickness_m`` along x in [0, ``model.length``]. A model with no
         pipes or no section gives an empty mesh.
     params : SweepParams
 

@@ -33,44 +33,103 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from guardrail_core.errors import ReconstructionError
+from guardrail_core.params import StageParams, param
 from guardrail_core.reconstruct.model import Pole
 from guardrail_core.reconstruct.runs import check_points
 from guardrail_core.reconstruct.unit_frame import UP, UnitFrame
 
-#: Cosine of the largest turn (30 degrees) from one placed pole to the next beyond the end poles.
-MAX_TURN_COS = float(np.cos(np.radians(30.0)))
-
 
 @dataclass(frozen=True)
-class UnitParams:
-    """How a run is split into units."""
+class UnitParams(StageParams):
+    """How a run is split into units, and where its missing poles are placed."""
 
-    end_margin_m: float = 0.3
-    """Metres. Points up to this far beyond the first or last pole (along the end unit's x)
-    still belong to the end unit; farther ones to none."""
-    max_offset_m: float = 1.0
-    """Metres. Points farther than this from a unit's pole plane (|z|) belong to no unit."""
-    ground_clearance_m: float = 0.05
-    """Metres. Points lower than this above a unit's ground line are ground the classifier took
-    for guardrail (no rail runs that low), not the unit shape."""
-    missing_pole_ratio: float = 1.6
-    """A gap longer than this many times the median gap between poles has missing poles:
-    round(gap / median) - 1 virtual poles are inserted in it."""
-    rail_level_tolerance_m: float = 0.03
-    """Metres. In one design the rail's top (95th percentile of z within ``rail_top_radius_m``
-    of a pole) stands at one height above every pole's ground. Where these heights spread
-    (max - min) wider than this, the ground under the poles is uneven (a verge, a kerb; on a
-    real motorway scan they spread 0.71-0.79 m) and each pole's ground is set to the rail top
-    near it less the median height, so the units follow the rail. A rail top off the
-    (Theil-Sen) line of the others by more than this is a rail unseen near that pole: that
-    pole keeps its measured ground. 0 turns this off."""
-    rail_top_radius_m: float = 1.0
-    """Metres. Rail points within this horizontal distance of a pole give the rail top there."""
-    min_extension_points: int = 10
-    """Points. Where at least this many rail points lie more than half a spacing beyond an end
-    pole (within a spacing of it), the rail goes on where no pole was seen (a sparse scan sees
-    poles only near the scanner): a virtual pole is added a spacing further along the rail, and
-    again while the rail goes on. 0 turns this off."""
+    end_margin_m: float = param(
+        0.3,
+        unit="m",
+        ge=0,
+        le=10.0,
+        doc="Points up to this far beyond the first or last pole (along the end unit's x) still "
+        "belong to the end unit; farther ones to none.",
+    )
+    max_offset_m: float = param(
+        1.0,
+        unit="m",
+        gt=0,
+        le=10.0,
+        doc="Points farther than this from a unit's pole plane (|z|) belong to no unit.",
+    )
+    ground_clearance_m: float = param(
+        0.05,
+        unit="m",
+        ge=-1.0,
+        le=2.0,
+        doc="Points lower than this above a unit's ground line are ground the classifier took for "
+        "guardrail (no rail runs that low), not the unit shape (negative: points below the "
+        "ground line are kept down to this).",
+    )
+    missing_pole_ratio: float = param(
+        1.6,
+        gt=1,
+        doc="A gap longer than this many times the median gap between poles has missing poles: "
+        "round(gap / median) - 1 virtual poles are inserted in it.",
+    )
+    rail_level_tolerance_m: float = param(
+        0.03,
+        unit="m",
+        ge=0,
+        le=1.0,
+        doc="In one design the rail's top (the ``rail_top_percentile`` of z within "
+        "``rail_top_radius_m`` of a pole) stands at one height above every pole's ground. "
+        "Where these heights spread (max - min) wider than this, the ground under the poles "
+        "is uneven (a verge, a kerb; on a real motorway scan they spread 0.71-0.79 m) and "
+        "each pole's ground is set to the rail top near it less the median height, so the "
+        "units follow the rail. A rail top off the (Theil-Sen) line of the others by more "
+        "than this is a rail unseen near that pole: that pole keeps its measured ground. 0 "
+        "turns this off.",
+    )
+    rail_top_radius_m: float = param(
+        1.0,
+        unit="m",
+        gt=0,
+        le=10.0,
+        doc="Rail points within this horizontal distance of a pole give the rail top there.",
+    )
+    rail_top_percentile: float = param(
+        95.0,
+        ge=0,
+        le=100,
+        doc="Percent. The rail's top is this percentile of the heights of the rail points near a "
+        "pole (not the highest: a stray point above the rail would be).",
+    )
+    rail_top_min_points: int = param(
+        3, ge=1, doc="Points. Fewer rail points near a pole give no rail top there."
+    )
+    min_extension_points: int = param(
+        10,
+        ge=0,
+        doc="Points. Where at least this many rail points lie more than "
+        "``extension_beyond_share`` of a spacing beyond an end pole (within a spacing of it), "
+        "the rail goes on where no pole was seen (a sparse scan sees poles only near the "
+        "scanner): a virtual pole is added a spacing further along the rail, and again while "
+        "the rail goes on. 0 turns this off.",
+    )
+    extension_beyond_share: float = param(
+        0.5,
+        ge=0,
+        le=1,
+        doc="Share of a spacing beyond an end pole that the rail points of "
+        "``min_extension_points`` must lie past (nearer ones are the end unit's own rail "
+        "ends).",
+    )
+    max_turn_deg: float = param(
+        30.0,
+        unit="deg",
+        gt=0,
+        le=90,
+        doc="The largest turn from one placed pole to the next beyond the end poles: where the "
+        "rail points ahead turn more, they are not the rail going on (clutter across it, or "
+        "the run's end turning away).",
+    )
 
 
 @dataclass(frozen=True)
@@ -190,9 +249,9 @@ def _level_to_rail(
     near = cKDTree(rails[:, :2]).query_ball_point(pos[:, :2], params.rail_top_radius_m)
     top = np.full(len(poles), np.nan)
     for k, i in enumerate(near):  # per pole
-        if len(i) >= 3:
+        if len(i) >= params.rail_top_min_points:
             along = (rails[i, :2] - pos[k, :2]) @ tangent[k]
-            top[k] = np.percentile(rails[i, 2] - grade * along, 95)
+            top[k] = np.percentile(rails[i, 2] - grade * along, params.rail_top_percentile)
     known = np.isfinite(top)
     if known.sum() < 2:
         return list(poles), []
@@ -242,7 +301,7 @@ def _extend_ends(
 
     Each new pole stands a spacing (the median gap) from the current end pole, along the
     principal direction of the rail points within the next spacing (a curve is followed), its
-    ground raised or lowered as the rail's top (95th percentile of z) rises or falls from the
+    ground raised or lowered as the rail's top (``rail_top_percentile`` of z) rises or falls from the
     previous stretch to the next. Returns the poles and how many were added before and after.
     """
     if params.min_extension_points <= 0 or len(poles) < 2 or len(rails) == 0:
@@ -254,6 +313,7 @@ def _extend_ends(
     radius = float(np.median([p.radius for p in poles]))
     height = float(np.median([p.height for p in poles]))
     limit = int(np.ptp(rails[:, :2], axis=0).max() / spacing) + 1
+    max_turn_cos = float(np.cos(np.radians(params.max_turn_deg)))
     added: list[list[Pole]] = []
     for end, prev in ((pos[-1], pos[-2]), (pos[0], pos[1])):
         new: list[Pole] = []
@@ -265,20 +325,21 @@ def _extend_ends(
             across = np.abs(d @ np.array([-direction[1], direction[0]]))
             near = across <= params.max_offset_m
             ahead = near & (t > 0) & (t <= spacing)
-            if (ahead & (t > 0.5 * spacing)).sum() < params.min_extension_points:
+            beyond = t > params.extension_beyond_share * spacing
+            if (ahead & beyond).sum() < params.min_extension_points:
                 break
             if top_before is None:
                 behind = near & (t <= 0) & (t > -spacing)
                 if behind.sum() < params.min_extension_points:
                     break
-                top_before = float(np.percentile(rails[behind, 2], 95))
+                top_before = float(np.percentile(rails[behind, 2], params.rail_top_percentile))
             xy = rails[ahead, :2]
             _, _, vt = np.linalg.svd(xy - xy.mean(axis=0), full_matrices=False)
             turn = vt[0] if vt[0] @ direction >= 0 else -vt[0]
-            if turn @ direction < MAX_TURN_COS:
+            if turn @ direction < max_turn_cos:
                 break  # not a rail going on: clutter across it, or the run's end turning away
             direction = turn
-            top = float(np.percentile(rails[ahead, 2], 95))
+            top = float(np.percentile(rails[ahead, 2], params.rail_top_percentile))
             cur = np.array([*(cur[:2] + spacing * direction), cur[2] + top - top_before])
             top_before = top
             new.append(Pole(position=cur.copy(), radius=radius, height=height, n_points=0))

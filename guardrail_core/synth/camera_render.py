@@ -19,7 +19,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from guardrail_core.camera_model import Camera
+from guardrail_core.params import StageParams, param
+from guardrail_core.sensors.camera import Camera
 from guardrail_core.synth.materials import MATERIAL_NAMES, MATERIALS
 from guardrail_core.synth.raycast import SceneRaycaster
 
@@ -54,48 +55,82 @@ class Lighting:
 
 
 @dataclass(frozen=True)
-class RenderParams:
-    """Constants of the shading model (tuned by eye on street scenes).
+class RenderParams(StageParams):
+    """Constants of the shading model (tuned by eye on street scenes)."""
 
-    Attributes
-    ----------
-    shadow_offset_m, shadow_offset_per_m : shadow-ray origin offset along the normal, metres,
-        ``offset + per_m * t`` so float32 hit points far away do not shadow themselves
-    ambient_floor : fraction of sky light still reaching a downward-facing surface
-    shininess_min, shininess_span : Blinn-Phong exponent ``min + span * material.specular``
-    reflection_strength : scale of the Fresnel-weighted sky reflection on glossy materials
-    texture_octave_ratio : feature size of the coarse noise octave / the material's scale
-    texture_fine_weight : share of the texture amplitude given to the fine octave
-    texture_min_cells_px : a noise octave fades out when its cell spans fewer pixels than this
-    sun_glow_width, sun_glow_strength : sharp glow around the sun: ``exp((cos - 1) / width)``
-    sun_halo_power, sun_halo_strength : broad forward-scattering halo ``max(cos, 0) ** power``
-    ground_below_horizon : radiance of the (unmodelled) ground seen below the horizon, x horizon
-    vignetting : fraction of the ``cos^4`` fall-off the lens shows (0 none, 1 full)
-    optics_blur_sigma_px : Gaussian blur of the lens/sensor, pixels (softens aliased edges)
-    shot_noise_gain : photon-noise variance per unit signal (1 / full-well electrons)
-    read_noise : read-noise standard deviation, fraction of full scale
-    chunk_rays : hits shaded per block (a speed knob only; results do not depend on it)
-    """
-
-    shadow_offset_m: float = 0.004
-    shadow_offset_per_m: float = 2e-4
-    ambient_floor: float = 0.45
-    shininess_min: float = 8.0
-    shininess_span: float = 150.0
-    reflection_strength: float = 0.6
-    texture_octave_ratio: float = 6.0
-    texture_fine_weight: float = 0.6
-    texture_min_cells_px: float = 0.6
-    sun_glow_width: float = 0.0015
-    sun_glow_strength: float = 6.0
-    sun_halo_power: float = 12.0
-    sun_halo_strength: float = 0.35
-    ground_below_horizon: float = 0.35
-    vignetting: float = 0.45
-    optics_blur_sigma_px: float = 0.55
-    shot_noise_gain: float = 1.0 / 1500.0
-    read_noise: float = 0.0012
-    chunk_rays: int = 65536
+    shadow_offset_m: float = param(
+        0.004,
+        unit="m",
+        ge=0,
+        le=1,
+        doc="shadow-ray origin offset along the normal, shadow_offset_m + shadow_offset_per_m * "
+        "distance, so float32 hit points far away do not shadow themselves",
+    )
+    shadow_offset_per_m: float = param(
+        2e-4, unit="m/m", ge=0, le=0.1, doc="growth of the shadow-ray offset with distance"
+    )
+    ambient_floor: float = param(
+        0.45, ge=0, le=1, doc="fraction of sky light still reaching a downward-facing surface"
+    )
+    shininess_min: float = param(
+        8.0, ge=0, le=10_000, doc="Blinn-Phong exponent: min + span * material.specular"
+    )
+    shininess_span: float = param(150.0, ge=0, le=10_000, doc="see shininess_min")
+    reflection_strength: float = param(
+        0.6, ge=0, le=10, doc="scale of the Fresnel-weighted sky reflection on glossy materials"
+    )
+    texture_octave_ratio: float = param(
+        6.0, gt=0, le=1000, doc="feature size of the coarse noise octave / the material's scale"
+    )
+    texture_fine_weight: float = param(
+        0.6, ge=0, le=1, doc="share of the texture amplitude given to the fine octave"
+    )
+    texture_min_cells_px: float = param(
+        0.6,
+        unit="px",
+        ge=0,
+        le=1000,
+        doc="a noise octave fades out when its cell spans fewer pixels than this",
+    )
+    sun_glow_width: float = param(
+        0.0015, gt=0, le=2, doc="sharp glow around the sun: exp((cos - 1) / width)"
+    )
+    sun_glow_strength: float = param(6.0, ge=0, le=1000, doc="see sun_glow_width")
+    sun_halo_power: float = param(
+        12.0, ge=0, le=1000, doc="broad forward-scattering halo: max(cos, 0) ** power"
+    )
+    sun_halo_strength: float = param(0.35, ge=0, le=100, doc="see sun_halo_power")
+    ground_below_horizon: float = param(
+        0.35,
+        ge=0,
+        le=10,
+        doc="radiance of the (unmodelled) ground seen below the horizon, times the horizon's",
+    )
+    vignetting: float = param(
+        0.45, ge=0, le=1, doc="fraction of the cos^4 fall-off the lens shows (0 none, 1 full)"
+    )
+    optics_blur_sigma_px: float = param(
+        0.55,
+        unit="px",
+        ge=0,
+        le=100,
+        doc="Gaussian blur of the lens and sensor (softens aliased edges)",
+    )
+    shot_noise_gain: float = param(
+        1.0 / 1500.0,
+        ge=0,
+        le=1,
+        doc="photon-noise variance per unit signal (1 / full-well electrons)",
+    )
+    read_noise: float = param(
+        0.0012, ge=0, le=1, doc="read-noise standard deviation, fraction of full scale"
+    )
+    chunk_rays: int = param(
+        65536,
+        ge=1,
+        le=2**31 - 1,
+        doc="hits shaded per block (a speed knob only; results do not depend on it)",
+    )
 
 
 DEFAULT_RENDER_PARAMS = RenderParams()

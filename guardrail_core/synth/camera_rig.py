@@ -16,8 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from guardrail_core.camera_model import Camera
-from guardrail_core.geometry import make_transform, rotation_from_euler
+from guardrail_core.geom.frames import make_transform, rotation_from_euler
+from guardrail_core.sensors.camera import Camera
 
 #: Camera axes (OpenCV: x right, y down, z forward) in the vehicle frame (x fwd, y left, z up)
 #: for a camera looking straight ahead: columns are the camera's x, y, z axes.

@@ -18,7 +18,7 @@ from collections.abc import Callable
 import numpy as np
 
 from guardrail_core.classes import TruthClass
-from guardrail_core.mesh import Mesh, box, cylinder, dome, segment_box, sphere, tube
+from guardrail_core.geom.mesh import Mesh, box, cylinder, dome, segment_box, sphere, tube
 from guardrail_core.synth.materials import PAINTS
 from guardrail_core.synth.mesh import MeshBuilder
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from guardrail_core.classes import TruthClass
-from guardrail_core.mesh import cylinder, dome, sweep, thick_outline, tube
+from guardrail_core.geom.mesh import cylinder, dome, sweep, thick_outline, tube
 from guardrail_core.synth.designs import Design
 from guardrail_core.synth.materials import PAINTS
 from guardrail_core.synth.mesh import MeshBuilder

@@ -1,6 +1,6 @@
 """The scene mesh that carries truth per face.
 
-The primitives live in :mod:`guardrail_core.mesh` (shared with the reconstruction); each returns
+The primitives live in :mod:`guardrail_core.geom.mesh` (shared with the reconstruction); each returns
 ``(vertices (V, 3) float64, faces (F, 3) int64)`` in metres. :class:`MeshBuilder` gathers them
 with a truth class, an object id and a material per face, so that a ray hit (a face id) tells at
 once what was hit.
@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from guardrail_core.mesh import Mesh
+from guardrail_core.geom.mesh import Mesh
 from guardrail_core.synth.materials import MATERIAL_ID
 
 

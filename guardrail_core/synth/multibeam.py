@@ -14,10 +14,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from guardrail_core.scanner_model import ScannerParams, azimuth_phase
+from guardrail_core.params import StageParams, param
+from guardrail_core.sensors.scanner import ScannerParams, azimuth_phase
+from guardrail_core.sensors.trajectory import Trajectory
 from guardrail_core.synth.raycast import SceneRaycaster
 from guardrail_core.synth.scanner import ReturnModel, Scan, measure_returns
-from guardrail_core.trajectory import Trajectory
 
 
 def hdl64_elevations_deg() -> np.ndarray:
@@ -29,21 +30,37 @@ def hdl64_elevations_deg() -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class MultibeamParams:
-    """The multi-beam scanner and how often it takes a frame.
+class MultibeamParams(StageParams):
+    """The multi-beam scanner and how often it takes a frame."""
 
-    Attributes
-    ----------
-    elevations_deg : (R,) float, beam elevations, degrees, highest first
-    firings_per_rotation : int, azimuth steps per turn (the HDL-64E: about 2083 at 10 Hz)
-    elevation_jitter_deg : float, 1 sigma of each beam's calibration error, degrees
-    frame_every_m : float, metres driven between frames
-    """
+    elevations_deg: tuple[float, ...] = param(
+        tuple(hdl64_elevations_deg().tolist()),
+        unit="deg",
+        ge=-90,
+        le=90,
+        doc="(R,) beam elevations, highest first",
+    )
+    firings_per_rotation: int = param(
+        2083,
+        ge=1,
+        le=100_000,
+        doc="azimuth steps per turn (the HDL-64E: about 2083 at 10 Hz)",
+    )
+    elevation_jitter_deg: float = param(
+        0.03, unit="deg", ge=0, le=5, doc="1 sigma of each beam's calibration error"
+    )
+    frame_every_m: float = param(
+        60.0, unit="m", gt=0, le=10_000, doc="metres driven between frames"
+    )
 
-    elevations_deg: tuple[float, ...] = tuple(hdl64_elevations_deg().tolist())
-    firings_per_rotation: int = 2083
-    elevation_jitter_deg: float = 0.03
-    frame_every_m: float = 60.0
+    def check_relations(self) -> None:
+        elevations = np.asarray(self.elevations_deg, np.float64)
+        if elevations.ndim != 1 or len(elevations) == 0:
+            self.fail(f"elevations_deg must hold one elevation per beam, got {self.elevations_deg}")
+        if not np.all(np.abs(elevations) <= 90):
+            self.fail(f"elevations_deg must lie within [-90, 90] deg, got {self.elevations_deg}")
+        if np.any(np.diff(elevations) > 0):
+            self.fail("elevations_deg must run from the highest beam to the lowest")
 
 
 def scan_frames(
@@ -66,7 +83,7 @@ def scan_frames(
     travelled = np.concatenate(
         [[0.0], np.cumsum(np.linalg.norm(np.diff(trajectory.position, axis=0), axis=1))]
     )
-    turn_s = 1.0 / scanner.rotations_per_second
+    turn_s = 1.0 / scanner.rotation_rate_hz
     marks = np.arange(params.frame_every_m / 2, travelled[-1], params.frame_every_m)
     starts = np.interp(marks, travelled, trajectory.time)
     starts = starts[starts + turn_s <= trajectory.time[-1]]

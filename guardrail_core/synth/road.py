@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from guardrail_core.classes import TruthClass
-from guardrail_core.mesh import grid_surface
+from guardrail_core.geom.mesh import grid_surface
 from guardrail_core.synth.mesh import MeshBuilder
 
 SIDES = {"left": 1.0, "right": -1.0}

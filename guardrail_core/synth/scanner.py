@@ -1,7 +1,7 @@
 """The 360-degree profile laser scanner: rays from the moving vehicle into the scene.
 
-Every measurement k is fired at ``t0 + k / rate`` from the scanner's pose at that instant, so
-motion skews each profile exactly as on a real mobile mapping system; ranges get Gaussian noise
+Every measurement k is fired at ``t0_s + k / measurement_rate_hz`` from the scanner's pose at that
+instant, so motion skews each profile exactly as on a real mobile mapping system; ranges get Gaussian noise
 along the beam, returns get an intensity from the material and the incidence angle, and weak
 returns drop out.
 """
@@ -13,32 +13,32 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from guardrail_core.scanner_model import ScannerParams
+from guardrail_core.params import StageParams, param
+from guardrail_core.sensors.scanner import ScannerParams
+from guardrail_core.sensors.trajectory import Trajectory
 from guardrail_core.synth.materials import MATERIAL_NAMES, MATERIALS
 from guardrail_core.synth.raycast import SceneRaycaster
-from guardrail_core.trajectory import Trajectory
 
 _REFLECTIVITY = np.array([MATERIALS[name].reflectivity for name in MATERIAL_NAMES])
 _DROPOUT = np.array([MATERIALS[name].dropout for name in MATERIAL_NAMES])
 
 
 @dataclass(frozen=True)
-class ReturnModel:
-    """How a surface answers a pulse.
+class ReturnModel(StageParams):
+    """How a surface answers a pulse."""
 
-    Attributes
-    ----------
-    base_dropout : float, probability of losing any return
-    weak_signal : float, signal level (reflectivity x cos(incidence) x range factor) below which
-        returns start to drop out
-    range_knee_m : float, metres beyond which the received signal falls as 1 / r^2
-    intensity_noise : float, relative 1 sigma of the intensity
-    """
-
-    base_dropout: float = 0.01
-    weak_signal: float = 0.06
-    range_knee_m: float = 15.0
-    intensity_noise: float = 0.04
+    base_dropout: float = param(0.01, ge=0, le=1, doc="probability of losing any return")
+    weak_signal: float = param(
+        0.06,
+        gt=0,
+        le=1,
+        doc="signal level (reflectivity x cos(incidence) x range factor) below which returns "
+        "start to drop out",
+    )
+    range_knee_m: float = param(
+        15.0, unit="m", gt=0, le=1000, doc="beyond this the received signal falls as 1 / r^2"
+    )
+    intensity_noise: float = param(0.04, ge=0, le=10, doc="relative 1 sigma of the intensity")
 
 
 @dataclass(frozen=True)
@@ -127,11 +127,9 @@ def scan(
     ``progress`` is called with the number of rotations done after each chunk.
     """
     ppr = scanner.points_per_rotation
-    k_first = int(
-        np.ceil((trajectory.time[0] - scanner.t0) * scanner.measurements_per_second - 1e-6)
-    )
+    k_first = int(np.ceil((trajectory.time[0] - scanner.t0_s) * scanner.measurement_rate_hz - 1e-6))
     k_last = int(
-        np.floor((trajectory.time[-1] - scanner.t0) * scanner.measurements_per_second + 1e-6)
+        np.floor((trajectory.time[-1] - scanner.t0_s) * scanner.measurement_rate_hz + 1e-6)
     )
     r_first, r_last = -(-k_first // ppr), k_last // ppr  # whole rotations only
     mount_r = scanner.T_vehicle_scanner[:3, :3]
@@ -144,7 +142,7 @@ def scan(
     for r0 in range(r_first, r_last, rotations_per_chunk):
         r1 = min(r0 + rotations_per_chunk, r_last)
         k = np.arange(r0 * ppr, r1 * ppr, dtype=np.int64)
-        t = scanner.t0 + k / scanner.measurements_per_second
+        t = scanner.t0_s + k / scanner.measurement_rate_hz
         rot_wv, pos_wv = trajectory.poses(t)
         phase = k % ppr
         origin = pos_wv + rot_wv @ mount_t

@@ -16,8 +16,9 @@ from typing import Any
 import numpy as np
 import yaml
 
-from guardrail_core.errors import DriveFormatError, SceneSpecError
-from guardrail_core.scanner_model import (
+from guardrail_core.errors import SceneSpecError
+from guardrail_core.params import ParameterError
+from guardrail_core.sensors.scanner import (
     AZIMUTH_BINS,
     DEFAULT_MOUNT_POSITION_M,
     DEFAULT_MOUNT_RPY_DEG,
@@ -51,7 +52,7 @@ class Scene:
     spec : dict, the spec it was built from (normalised)
     road : Road
     vehicle : VehicleParams
-    scanner : ScannerParams, the scanner on the vehicle (``t0`` set when the drive starts)
+    scanner : ScannerParams, the scanner on the vehicle (``t0_s`` set when the drive starts)
     multibeam : MultibeamParams for a multi-beam scanner (its beams and frame spacing), else None
     drive_span : (s_start, s_end) metres along the road that the vehicle drives
     mesh : SceneMesh, every surface with its truth
@@ -210,17 +211,20 @@ def _scanner(
                 f"{height}"
             )
         mount = scanner_mounting((0.0, 0.0, height - reference_height_m), 0.0, 0.0, 0.0)
-        params = MultibeamParams(frame_every_m=frame_every)
-        scanner = ScannerParams(
-            rotations_per_second=10.0,
-            measurements_per_second=10.0 * AZIMUTH_BINS,
-            range_noise_m=_get(data, "range_noise_m", float, where, 0.02),
-            min_range_m=2.5,  # the car's own body
-            max_range_m=_get(data, "max_range_m", float, where, 120.0),
-            T_vehicle_scanner=mount,
-            kind=MULTIBEAM,
-            rings=len(params.elevations_deg),
-        )
+        try:
+            params = MultibeamParams(frame_every_m=frame_every)
+            scanner = ScannerParams(
+                rotation_rate_hz=10.0,
+                measurement_rate_hz=10.0 * AZIMUTH_BINS,
+                range_noise_m=_get(data, "range_noise_m", float, where, 0.02),
+                min_range_m=2.5,  # the car's own body
+                max_range_m=_get(data, "max_range_m", float, where, 120.0),
+                T_vehicle_scanner=mount,
+                kind=MULTIBEAM,
+                rings=len(params.elevations_deg),
+            )
+        except ParameterError as exc:
+            raise SceneSpecError(f"scanner: {exc}") from exc
         return scanner, params
     if kind != PROFILE:
         raise SceneSpecError(f"scanner.kind: expected {PROFILE} or {MULTIBEAM}, got {kind!r}")
@@ -231,13 +235,15 @@ def _scanner(
             f"scanner.mounting.position_m: expected [x, y, z] metres, got {position}"
         )
     defaults = ScannerParams()
+    # Specs written before the rates carried their unit name them as drive format 1.1 did.
+    data = {ScannerParams.renamed.get(key, key): value for key, value in data.items()}
     try:
         return ScannerParams(
-            rotations_per_second=_get(
-                data, "rotations_per_second", float, where, defaults.rotations_per_second
+            rotation_rate_hz=_get(
+                data, "rotation_rate_hz", float, where, defaults.rotation_rate_hz
             ),
-            measurements_per_second=_get(
-                data, "measurements_per_second", float, where, defaults.measurements_per_second
+            measurement_rate_hz=_get(
+                data, "measurement_rate_hz", float, where, defaults.measurement_rate_hz
             ),
             range_noise_m=_get(data, "range_noise_m", float, where, defaults.range_noise_m),
             max_range_m=_get(data, "max_range_m", float, where, defaults.max_range_m),
@@ -252,8 +258,8 @@ def _scanner(
                 yaw_deg=_get(mount, "yaw_deg", float, "scanner.mounting", DEFAULT_MOUNT_RPY_DEG[2]),
             ),
         ), None
-    except DriveFormatError as exc:
-        raise SceneSpecError(str(exc)) from exc
+    except ParameterError as exc:
+        raise SceneSpecError(f"scanner: {exc}") from exc
 
 
 def _side(item: dict, where: str) -> str:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import time
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -13,25 +14,25 @@ import numpy as np
 import yaml
 from tqdm import tqdm
 
-from guardrail_core.camera_model import Camera
-from guardrail_core.drive import (
+from guardrail_core.errors import InvalidOptionError, MissingDriveFileError
+from guardrail_core.formats.atomic import staged_folder
+from guardrail_core.formats.drive import (
     Drive,
     ImageRecord,
     PointCloud,
     Truth,
-    atomic_folder,
-    commit_folder,
     write_drive_files,
 )
-from guardrail_core.errors import InvalidOptionError, MissingDriveFileError
+from guardrail_core.sensors.camera import Camera
+from guardrail_core.sensors.trajectory import Trajectory
 from guardrail_core.synth.camera_render import random_lighting, render_image
 from guardrail_core.synth.camera_rig import default_camera_rig
+from guardrail_core.synth.designs import DESIGNS_DIR
 from guardrail_core.synth.multibeam import scan_frames
 from guardrail_core.synth.raycast import SceneRaycaster
 from guardrail_core.synth.scanner import scan
-from guardrail_core.synth.scene import Scene, build_scene
+from guardrail_core.synth.scene import SCENES_DIR, Scene, build_scene
 from guardrail_core.synth.vehicle import drive_along
-from guardrail_core.trajectory import Trajectory
 
 SIMULATOR_VERSION = "1"
 
@@ -84,20 +85,25 @@ def simulate_drive(
     seed: int = 0,
     options: SimulationOptions = SimulationOptions(),
     overwrite: bool = False,
+    inputs: Iterable[str | os.PathLike] = (),
     progress: bool = True,
 ) -> SimulationSummary:
     """Simulate a drive through the scene of ``spec`` and write it to the folder ``out``.
 
     The same spec, seed and options give the same drive, byte for byte in points and truth.
-    The folder is written beside ``out`` and renamed at the end: an error leaves nothing behind.
+    The folder is written beside ``out`` and renamed at the end
+    (:func:`guardrail_core.formats.atomic.staged_folder`): an error leaves nothing behind.
+    ``inputs`` are the files the spec came from (the scene YAML); ``out`` must not be, hold or
+    replace one of them, nor the shipped scenes and designs
+    (:class:`~guardrail_core.errors.InputInsideOutputError`, before any work).
     """
     out = Path(out)
     seconds: dict[str, float] = {}
     clock = time.perf_counter()
     scene_seq, motion_seq, scan_seq, camera_seq = np.random.SeedSequence(seed).spawn(4)
-    staging_dir = atomic_folder(out, overwrite=overwrite)
-    with staging_dir as staging_name:
-        staging = Path(staging_name)
+    # The shipped scenes and designs are inputs of every simulation.
+    sources = [*inputs, SCENES_DIR, DESIGNS_DIR]
+    with staged_folder(out, overwrite=overwrite, inputs=sources) as staging:
         scene = build_scene(spec, seed=_scene_seed(scene_seq))
         seconds["scene"] = time.perf_counter() - clock
 
@@ -111,7 +117,7 @@ def simulate_drive(
             t0=t0,
             rng=np.random.default_rng(motion_seq),
         )
-        scanner = dataclasses.replace(scene.scanner, t0=float(trajectory.time[0]))
+        scanner = dataclasses.replace(scene.scanner, t0_s=float(trajectory.time[0]))
         raycaster = SceneRaycaster(scene.mesh)
         if scene.multibeam is not None:
             with tqdm(desc="scanning", unit="frame", disable=not progress, leave=False) as bar:
@@ -124,7 +130,7 @@ def simulate_drive(
                     progress=bar.update,
                 )
         else:
-            n_rot = int((trajectory.time[-1] - trajectory.time[0]) * scanner.rotations_per_second)
+            n_rot = int((trajectory.time[-1] - trajectory.time[0]) * scanner.rotation_rate_hz)
             with tqdm(
                 total=n_rot, desc="scanning", unit="rot", disable=not progress, leave=False
             ) as bar:
@@ -181,7 +187,6 @@ def simulate_drive(
         )
         (staging / "truth" / "scene.yaml").write_text(yaml.safe_dump(scene.spec, sort_keys=False))
         seconds["write"] = time.perf_counter() - clock
-        commit_folder(staging, out)
     length = float(np.sum(np.linalg.norm(np.diff(trajectory.position, axis=0), axis=1)))
     return SimulationSummary(
         out=out,

@@ -6,32 +6,49 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from guardrail_core.params import StageParams, param
+from guardrail_core.sensors.trajectory import Trajectory
 from guardrail_core.synth.road import Road
-from guardrail_core.trajectory import Trajectory
 
 
 @dataclass(frozen=True)
-class VehicleParams:
-    """How the vehicle drives.
+class VehicleParams(StageParams):
+    """How the vehicle drives."""
 
-    Attributes
-    ----------
-    speed_mps : (min, max) metres per second; the speed wanders smoothly between them
-    lane : int, lane index counted from the left edge of the carriageway (0 = leftmost)
-    wander_m : float, amplitude of the lateral wander inside the lane
-    reference_height_m : float, height of the vehicle origin (IMU) above the road
-    rate_hz : float, trajectory sampling rate
-    vibration_deg : float, 1 sigma of the body's roll/pitch vibration
-    body_roll_per_mps2 : float, radians of body roll per m/s^2 of lateral acceleration
-    """
+    speed_mps: tuple[float, float] = param(
+        (8.0, 12.0),
+        unit="m/s",
+        gt=0,
+        le=60,
+        doc="(min, max); the speed wanders smoothly between them",
+    )
+    lane: int = param(
+        0, ge=0, le=20, doc="lane index counted from the left edge of the carriageway (0: leftmost)"
+    )
+    wander_m: float = param(
+        0.15, unit="m", ge=0, le=5, doc="amplitude of the lateral wander inside the lane"
+    )
+    reference_height_m: float = param(
+        1.8, unit="m", gt=0, le=10, doc="height of the vehicle origin (IMU) above the road"
+    )
+    rate_hz: float = param(100.0, unit="Hz", gt=0, le=10_000, doc="trajectory sampling rate")
+    vibration_deg: float = param(
+        0.08, unit="deg", ge=0, le=10, doc="1 sigma of the body's roll and pitch vibration"
+    )
+    body_roll_per_mps2: float = param(
+        0.006,
+        unit="rad/(m/s^2)",
+        ge=-1,
+        le=1,
+        doc="body roll per m/s^2 of lateral acceleration",
+    )
 
-    speed_mps: tuple[float, float] = (8.0, 12.0)
-    lane: int = 0
-    wander_m: float = 0.15
-    reference_height_m: float = 1.8
-    rate_hz: float = 100.0
-    vibration_deg: float = 0.08
-    body_roll_per_mps2: float = 0.006
+    def check_relations(self) -> None:
+        low, high = self.speed_mps
+        if not 0 < low <= high <= 60:
+            self.fail(
+                f"speed_mps must be (min, max) with 0 < min <= max <= 60, got {self.speed_mps}"
+            )
 
 
 def _smooth_noise(n: int, dt: float, period_s: float, rng: np.random.Generator) -> np.ndarray:

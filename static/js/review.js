@@ -30,10 +30,27 @@ const state = {
 };
 
 // Actions (label, undo, next, train, activate) run one after the other.
-const run = api.serializer((err) => {
+const serialize = api.serializer((err) => {
   console.error(err);
   toast(err.message || String(err), "error");
 });
+
+// What the page is doing, for tests and tools to wait on (never on time):
+// <body data-state> is "ready" once the first loads (info, selection, detail,
+// queue) settled; <body data-actions> counts the actions finished, each with
+// the refresh it does (afterChange), whether it succeeded or not.
+let actionsDone = 0;
+
+function run(fn) {
+  return serialize(async () => {
+    try {
+      await fn();
+    } finally {
+      actionsDone += 1;
+      document.body.dataset.actions = String(actionsDone);
+    }
+  });
+}
 
 // ---- banner (connection / auth problems) -------------------------------
 
@@ -555,6 +572,8 @@ function refreshOnReturn() {
 // ---- start --------------------------------------------------------------
 
 async function init() {
+  document.body.dataset.state = "loading";
+  document.body.dataset.actions = "0";
   api.keepTokenInLinks();
   document.addEventListener("keydown", onKeyDown);
   window.addEventListener("blur", () => setFocusHint(true));
@@ -593,9 +612,12 @@ async function init() {
   } catch (err) {
     setBanner(explain(err));
     $("banner").dataset.sticky = err.status === 401 || err.status === 403 ? "1" : "";
-    if ($("banner").dataset.sticky) return; // nothing else will work either
+    if ($("banner").dataset.sticky) {
+      document.body.dataset.state = "failed";
+      return; // nothing else will work either
+    }
   }
-  loadQueue().catch((err) => toast(`queue: ${err.message}`, "error"));
+  const queueLoaded = loadQueue().catch((err) => toast(`queue: ${err.message}`, "error"));
   resumeTraining().catch(() => {}); // a training started before a reload goes on showing
 
   const wanted = new URLSearchParams(window.location.search).get("segment");
@@ -606,6 +628,8 @@ async function init() {
   }
   renderDetail();
   setInterval(pollSelection, SELECTION_POLL_MS);
+  await queueLoaded;
+  document.body.dataset.state = "ready";
 }
 
 init();

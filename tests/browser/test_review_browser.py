@@ -3,12 +3,19 @@
 Opens the app, sees the 3D scene connect, relabels with the keyboard, kills and restarts the
 server and finds the label still there, fine-tunes a model and activates it, and uses the crop
 gallery's keys. Screenshots go to the test's folder (and to ``$GUARDRAIL_SCREENSHOTS`` when set).
+
+Every step waits on the state it then asserts, never on time: the page's ``<body data-state>``
+("ready" once its first loads settled) and ``data-actions`` (actions finished), the API answer a
+key or a click produces, the 3D scene's own panel. The timeouts below only bound how long a state
+may take to appear before the test fails (a loaded CI machine renders the software-WebGL scene
+slowly); no step ever lasts them when things work.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import signal
 import socket
@@ -18,6 +25,7 @@ import time
 import urllib.request
 from collections.abc import Iterator
 from pathlib import Path
+from urllib.parse import urlsplit
 
 import pytest
 
@@ -32,6 +40,10 @@ CHROMIUM_ARGS = [
     "--disable-component-update",
     "--no-first-run",
 ]
+#: The most a state may take to appear (the test goes on as soon as it is there).
+WAIT_MS = 120_000
+#: The same for the server's slow work: fine-tuning a model, re-predicting the run with it.
+JOB_MS = 300_000
 
 
 def _free_port() -> int:
@@ -74,7 +86,7 @@ class Server:
         args = [*self.args, "--port", str(self.port), "--scene-port", str(scene_port)]
         with self.log.open("a") as log:
             self.process = subprocess.Popen(args, stdout=log, stderr=subprocess.STDOUT)
-        deadline = time.monotonic() + 180
+        deadline = time.monotonic() + 300
         while time.monotonic() < deadline:
             if self.process.poll() is not None:
                 raise RuntimeError(f"the server exited: {self.log.read_text()[-2000:]}")
@@ -128,70 +140,103 @@ def test_review_app_in_the_browser(server: Server, shots: Path) -> None:
     with sync_playwright() as p:
         browser = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
         page = browser.new_page(viewport={"width": 1440, "height": 900})
+        page.set_default_timeout(WAIT_MS)  # clicks, waits for answers
         errors: list[str] = []
         page.on("pageerror", lambda exc: errors.append(str(exc)))
+        body = page.locator("body")
+        scene = page.frame_locator("#scene").locator("body")  # viser's page, in the iframe
 
-        # Open the app on a segment; the 3D scene (viser, in the iframe) connects.
+        # Open the app on a segment: the page loads it (and has the server select it), and the
+        # 3D scene (viser) connects and shows the selection in its own panel.
         page.goto(f"{server.url}/?segment={s}")
-        expect(page.locator("#selected-id")).to_have_text(str(s), timeout=30_000)
-        _wait_for(lambda: _get(f"{server.url}/api/info")["scene_clients"] >= 1, "3D scene")
+        expect(body).to_have_attribute("data-state", "ready", timeout=WAIT_MS)
+        expect(page.locator("#selected-id")).to_have_text(str(s))
         assert _get(f"{server.url}/api/selection")["segments"] == [s]
+        expect(scene).to_contain_text(re.compile(rf"Segment {s}\b"), timeout=WAIT_MS)
+        assert _get(f"{server.url}/api/info")["scene_clients"] >= 1
 
-        # Relabel with the keyboard (focus on the page, not on the 3D iframe).
+        # Relabel with the keyboard. The keys must reach the page, not the 3D iframe: viser's own
+        # G/O hotkeys relabel on the server and leave this page showing the old label.
         page.locator("#selected-id").click()
-        page.keyboard.press(key)
+        assert page.evaluate("document.activeElement.id") != "scene"
+        done = int(body.get_attribute("data-actions") or 0)
+        with page.expect_response(_api("POST", "/api/labels/batch")) as answer:
+            page.keyboard.press(key)
+        assert answer.value.ok, answer.value.text()
+        assert [(x["id"], x["label"]) for x in answer.value.json()["segments"]] == [(s, flipped)]
+        # The action is over once the page has loaded the segment again and shown it.
+        expect(body).to_have_attribute("data-actions", str(done + 1), timeout=WAIT_MS)
         expect(page.locator("#selected-label")).to_have_attribute("data-label", flipped)
+        expect(page.locator("#selected-reviewed")).to_have_attribute("data-reviewed", "true")
         row = _get(f"{server.url}/api/segments/{s}")
         assert row["label"] == flipped and row["reviewed"] is True
         assert row["history"][0]["who"] == "browser-test"
-        page.wait_for_timeout(1500)  # let the 3D view draw the new colours
+        # The 3D view has the new colours: the scene's panel text, sent after them, says so.
+        expect(scene).to_contain_text(f"label {flipped} (reviewed)", timeout=WAIT_MS)
         page.screenshot(path=shots / "review.png")
 
         # A crash of the server loses no label: kill it, start it again, reload.
         server.kill()
         server.start()
         page.goto(f"{server.url}/?segment={s}")
-        expect(page.locator("#selected-label")).to_have_attribute(
-            "data-label", flipped, timeout=30_000
-        )
+        expect(body).to_have_attribute("data-state", "ready", timeout=WAIT_MS)
+        expect(page.locator("#selected-id")).to_have_text(str(s))
+        expect(page.locator("#selected-label")).to_have_attribute("data-label", flipped)
         expect(page.locator("#selected-reviewed")).to_have_attribute("data-reviewed", "true")
 
         # Fine-tune from the labels, see the new model beside the current one, activate it.
         before = _get(f"{server.url}/api/models")["active"]
-        page.locator("#train").click()
-        expect(page.locator("#activate")).to_be_visible(timeout=240_000)
+        with page.expect_response(_api("POST", "/api/train")) as answer:
+            page.locator("#train").click()
+        assert answer.value.status == 202, answer.value.text()
+        expect(page.locator("#activate")).to_be_visible(timeout=JOB_MS)
         expect(page.locator("#compare-table")).to_contain_text("guardrail")
         page.screenshot(path=shots / "fine-tune.png")
-        page.locator("#activate").click()
-        _wait_for(lambda: _get(f"{server.url}/api/models")["active"] != before, "activation")
-        active = _get(f"{server.url}/api/models")["active"]
-        expect(page.locator("#header-model")).to_contain_text(active[:15], timeout=30_000)
+        done = int(body.get_attribute("data-actions") or 0)
+        with page.expect_response(_api("POST", "/api/models/*/activate"), timeout=JOB_MS) as answer:
+            page.locator("#activate").click()
+        assert answer.value.ok, answer.value.text()
+        active = answer.value.json()["active"]
+        assert active != before and _get(f"{server.url}/api/models")["active"] == active
+        expect(body).to_have_attribute("data-actions", str(done + 1), timeout=WAIT_MS)
+        expect(page.locator("#header-model")).to_contain_text(active[:15])
         row = _get(f"{server.url}/api/segments/{s}")
         assert row["label"] == flipped, "an operator's label outlives a model change"
 
         # The gallery: crops, keyboard labelling, a link back to the 3D view.
         page.goto(f"{server.url}/gallery")
         crops = page.locator('#gallery-grid .crop[data-reviewed="false"]')
-        expect(crops.first).to_be_visible(timeout=30_000)
+        expect(crops.first).to_be_visible(timeout=WAIT_MS)
         first_id = int(crops.first.get_attribute("data-id") or -1)
         first = page.locator(f'#gallery-grid .crop[data-id="{first_id}"]')
         first.click()
-        page.keyboard.press("o")
+        expect(first).to_have_class(re.compile(r"\bfocused\b"))
+        with page.expect_response(_api("PUT", f"/api/segments/{first_id}/label")) as answer:
+            page.keyboard.press("o")
+        assert answer.value.ok, answer.value.text()
+        expect(first).to_have_attribute("data-reviewed", "true")
         expect(first).to_have_attribute("data-label", "other")
-        assert _get(f"{server.url}/api/segments/{first_id}")["label"] == "other"
-        page.keyboard.press("z")
-        _wait_for(
-            lambda: not _get(f"{server.url}/api/segments/{first_id}")["reviewed"], "undo in gallery"
-        )
+        row = _get(f"{server.url}/api/segments/{first_id}")
+        assert row["label"] == "other" and row["reviewed"] is True
+        with page.expect_response(_api("POST", "/api/labels/undo")) as answer:
+            page.keyboard.press("z")
+        assert answer.value.ok, answer.value.text()
+        assert first_id in [x["id"] for x in answer.value.json()["segments"]]
+        expect(first).to_have_attribute("data-reviewed", "false")
+        assert _get(f"{server.url}/api/segments/{first_id}")["reviewed"] is False
         page.screenshot(path=shots / "gallery.png")
         browser.close()
     assert not errors, errors
 
 
-def _wait_for(condition, what: str, timeout: float = 60.0) -> None:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if condition():
-            return
-        time.sleep(0.25)
-    raise TimeoutError(f"waited {timeout} s for {what}")
+def _api(method: str, path: str):
+    """A predicate for ``page.expect_response``: the answer to ``method path`` (``*`` matches
+    one path part)."""
+    pattern = re.compile("[^/]+".join(re.escape(part) for part in path.split("*")) + "$")
+
+    def matches(response) -> bool:
+        return response.request.method == method and bool(
+            pattern.match(urlsplit(response.url).path)
+        )
+
+    return matches

@@ -1,0 +1,332 @@
+"""The REST API's responses as pydantic models: what ``/openapi.json`` tells the pages.
+
+Every JSON route names one of these as its ``response_model``; the routes still build plain dicts
+and FastAPI checks them against the model on the way out. The models forbid fields they do not
+name, so a field a route adds without its model fails the app's tests instead of vanishing from
+the answer. Routes whose objects leave a field out where it does not apply (an older model
+folder's metrics, the run's model with no folder) answer with ``response_model_exclude_unset``,
+so a field the route did not set stays absent rather than becoming ``null``.
+
+The fields are in the order of the dicts the routes build: the JSON is what it was before the
+models (compared route by route, with a drive, a run, labels, a training and a reconstruction).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+#: An operator's or a model's label of a segment.
+LabelName = Literal["guardrail", "other"]
+#: Why a segment has a crop or not (:data:`guardrail_core.formats.run_folder.CROP_STATUS_NAMES`).
+CropStatusName = Literal["ok", "no_image", "too_small"]
+
+
+class ResponseModel(BaseModel):
+    """Base of the responses: unknown fields are an error (see the module docstring)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+
+class ErrorDetail(BaseModel):
+    """An error's answer (401, 404, 409, 422 from a route): what went wrong, in words."""
+
+    detail: str
+
+
+def file_response(media_types: Iterable[str], description: str) -> dict[int | str, Any]:
+    """``responses=`` of a route that sends a file: its 200 answer's media types, a file each."""
+    file = {"schema": {"type": "string", "format": "binary"}}
+    return {200: {"description": description, "content": dict.fromkeys(media_types, file)}}
+
+
+def error_response(status: int, description: str) -> dict[int | str, Any]:
+    """``responses=`` of a route that answers ``status`` with an :class:`ErrorDetail`."""
+    return {status: {"model": ErrorDetail, "description": description}}
+
+
+JPEG = file_response(["image/jpeg"], "The image (JPEG)")
+NOT_FOUND = error_response(404, "No such object (the detail names it)")
+CONFLICT = error_response(409, "The state does not allow it now (the detail says why)")
+UNAUTHORIZED = error_response(401, "The server needs its token (Authorization: Bearer or ?token=)")
+
+
+# -- info ---------------------------------------------------------------------------------------
+
+
+class LabelCounts(ResponseModel):
+    """Operator labels in the label store, by drive point."""
+
+    labelled_points: int
+    guardrail_points: int
+    other_points: int
+    batches: int = Field(description="label batches of both kinds (labellings and undos)")
+
+
+class StoredMetrics(BaseModel):
+    """Figures read from model folders of any version: fields this version does not know are
+    kept, and those an older version did not write stay absent."""
+
+    model_config = ConfigDict(extra="allow")
+
+
+class ClassMetrics(StoredMetrics):
+    """One class's figures on the held-out segments; a ratio without a denominator is null."""
+
+    recall: float | None = None
+    precision: float | None = None
+    f1: float | None = None
+    n: int | None = Field(default=None, description="held-out segments of this class")
+
+
+class HeldOutMetrics(StoredMetrics):
+    """A model's figures on held-out segments (§3.3)."""
+
+    guardrail: ClassMetrics | None = None
+    other: ClassMetrics | None = None
+    accuracy: float | None = None
+    n_train: int | None = None
+    n_held_out: int | None = Field(default=None, description="segments measured")
+    n_groups_held_out: int | None = None
+    threshold: float | None = Field(default=None, description="probability cut, 0..1")
+    n_reviewed_held_out: int | None = Field(
+        default=None, description="measured segments an operator reviewed (app training only)"
+    )
+    against: str | None = Field(
+        default=None, description="which labels the figures are measured against"
+    )
+    note: str | None = None
+    model: str | None = Field(default=None, description="the model measured (current model)")
+
+
+class ModelRow(ResponseModel):
+    """One model an operator can activate."""
+
+    version: str
+    created: str | None = Field(description="ISO 8601; null for the run's model without folder")
+    mode: str | None = Field(description="'fast' (head on embeddings) or 'full'")
+    held_out: HeldOutMetrics | None
+    held_out_current: HeldOutMetrics | None = Field(
+        description="the model it was compared with, measured on the same segments"
+    )
+    trained_on: dict[str, Any] | None = Field(
+        default=None, description="what it was trained on; absent when its folder is not known"
+    )
+    active: bool = Field(description="its predictions are the run's")
+    folder_known: bool = Field(description="its folder is known, so it can be activated again")
+
+
+class ModelMetrics(ResponseModel):
+    held_out: HeldOutMetrics | None
+
+
+class ActiveModel(ResponseModel):
+    """The model whose predictions the run holds (a :class:`ModelRow` and its metrics)."""
+
+    version: str
+    created: str | None = None
+    mode: str | None = None
+    held_out: HeldOutMetrics | None = None
+    held_out_current: HeldOutMetrics | None = None
+    trained_on: dict[str, Any] | None = None
+    active: bool | None = None
+    folder_known: bool | None = None
+    metrics: ModelMetrics
+
+
+class Info(ResponseModel):
+    """What is being reviewed, by whom, and where the 3D scene is."""
+
+    drive: str = Field(description="the drive folder")
+    run: str = Field(description="the run folder")
+    n_points: int = Field(description="points of the drive")
+    n_segments: int
+    reviewed_segments: int = Field(description="segments with an operator label")
+    label_counts: LabelCounts
+    operator: str = Field(description="the name recorded with each label by default")
+    model: ActiveModel
+    scene_url: str | None = Field(description="the viser 3D scene; null without one")
+    scene_clients: int = Field(description="browsers connected to the 3D scene")
+    token_required: bool
+
+
+# -- segments and labels ------------------------------------------------------------------------
+
+
+class HistoryEntry(ResponseModel):
+    """One label batch's change of one (old, new) pair of labels."""
+
+    batch: int
+    at: str = Field(description="ISO 8601, UTC")
+    who: str
+    model_version: str | None = Field(description="the model whose proposal was reviewed")
+    kind: Literal["label", "undo"]
+    old: LabelName | None = Field(description="null: the points were unlabelled")
+    new: LabelName | None = Field(description="null: the points became unlabelled (an undo)")
+    n_points: int = Field(description="points changed (of the segment asked for, when one was)")
+    segments: list[int] = Field(description="the segments the operator selected")
+    note: str
+    undone: bool
+    undoes: int | None = Field(description="for an undo, the batch it reverted")
+
+
+class Segment(ResponseModel):
+    """A segment of the run (a slice of a connected wireframe run, §3.1) and its labels."""
+
+    id: int
+    n_points: int
+    centroid: list[float] = Field(description="x, y, z in metres, drive frame")
+    slice_index: int
+    component: int = Field(description="the connected run it belongs to")
+    crop_status: CropStatusName
+    crop_url: str | None = Field(description="its crop (JPEG); null when it has none")
+    probability: float | None = Field(
+        description="the model's guardrail probability, 0..1; null without a crop"
+    )
+    raw_label: LabelName = Field(description="the model's label before correction")
+    model_label: LabelName = Field(description="the model's label after correction (§3.3)")
+    label: LabelName = Field(description="the operator's label where reviewed, else model_label")
+    reviewed: bool
+    truth: LabelName | None = Field(description="the simulated truth; null for real drives")
+
+
+class SegmentDetail(Segment):
+    """One segment with its camera image, rectangle and latest label history."""
+
+    image: str | None = Field(description="the camera image of its crop")
+    rect: list[int] = Field(description="x0, y0, x1, y1 of its crop in that image, pixels")
+    history: list[HistoryEntry] = Field(description="newest first, at most 20")
+
+
+class SegmentPage(ResponseModel):
+    """One page of the filtered, sorted segments."""
+
+    total: int = Field(description="segments passing the filters")
+    offset: int
+    limit: int
+    items: list[Segment]
+
+
+class Relabelled(ResponseModel):
+    """What a labelling or an undo changed."""
+
+    batch: int | None = Field(description="the batch recorded; null when nothing was undone")
+    undone_batch: int | None = Field(description="for an undo, the batch it reverted")
+    changed_points: int
+    segments: list[Segment] = Field(description="segments whose label may have changed")
+
+
+class History(ResponseModel):
+    items: list[HistoryEntry]
+
+
+# -- review queue and selection -----------------------------------------------------------------
+
+
+class QueueItem(Segment):
+    """An unreviewed segment worth a look."""
+
+    reason: Literal["disagrees", "uncertain"] = Field(
+        description="'disagrees': the correction changed the model's label"
+    )
+    score: float = Field(description="uncertainty (1 at p = 0.5) + 1 when it disagrees")
+
+
+class Queue(ResponseModel):
+    items: list[QueueItem]
+
+
+class Selection(ResponseModel):
+    segments: list[int] = Field(description="the selected segment ids, shared with the 3D view")
+
+
+# -- jobs and models ----------------------------------------------------------------------------
+
+
+class JobStarted(ResponseModel):
+    job: str = Field(description="the job id: poll /api/jobs/{job}")
+
+
+class TrainResult(ResponseModel):
+    """A fine-tuning job's result: the new model (saved, not active) against the current one."""
+
+    version: str
+    metrics_new: HeldOutMetrics | None
+    metrics_current: HeldOutMetrics | None
+    current_version: str
+    held_out_segments: int
+    seconds: float
+
+
+class ReconstructionSummary(ResponseModel):
+    """Guardrail runs by status, and the files written."""
+
+    runs: int
+    reconstructed: int
+    poles_only: int
+    not_reconstructed: int
+    files: list[str] = Field(description="paths inside the run's reconstruction folder")
+    seconds: float
+
+
+class ReconstructResult(ResponseModel):
+    summary: ReconstructionSummary
+
+
+class Job(ResponseModel):
+    """A background job of this server."""
+
+    id: str
+    kind: Literal["train", "reconstruct"]
+    status: Literal["queued", "running", "done", "failed"]
+    progress: float = Field(description="0..1")
+    message: str
+    error: str | None
+    result: TrainResult | ReconstructResult | None = Field(description="when done")
+
+
+class JobList(ResponseModel):
+    items: list[Job] = Field(description="newest first")
+
+
+class ModelList(ResponseModel):
+    active: str = Field(description="the active model's version")
+    models: list[ModelRow] = Field(description="newest first")
+
+
+class Activated(ResponseModel):
+    active: str
+    changed_segments: int = Field(description="segments whose label changed")
+
+
+# -- reconstruction -----------------------------------------------------------------------------
+
+
+class Download(ResponseModel):
+    name: str
+    bytes: int
+    url: str
+
+
+class Downloads(ResponseModel):
+    items: list[Download]
+
+
+class ReconstructionRun(ResponseModel):
+    """One reconstructed guardrail run."""
+
+    run_id: int
+    type: str | None = Field(description="the guardrail type; null when not reconstructed")
+    poles: int
+    units: int
+    notes: list[str] = Field(description="what could not be reconstructed, in words")
+
+
+class Reconstruction(ResponseModel):
+    params: dict[str, dict[str, Any]] = Field(
+        description="the parameters by stage, as in models.json"
+    )
+    runs: list[ReconstructionRun]
+    present: bool = Field(description="false: not reconstructed yet (params are the defaults)")

@@ -1,0 +1,102 @@
+"""Options several commands share, as argparse parent parsers, and their helpers.
+
+A command lists its parents after its own options: argparse puts a parent's options before
+the parser's own, so a command keeps the shared ones last by giving its own as the first parent.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from guardrail_core.formats.run_info import ReconstructionSummary
+    from guardrail_core.reconstruct.pipeline import ReconstructionParams
+
+# What `add_parser` receives: the sub-parsers of `guardrail` or of `guardrail import`.
+Subparsers = argparse._SubParsersAction  # argparse has no public name for it
+
+
+def options_parser() -> argparse.ArgumentParser:
+    """An empty parent parser (no -h of its own) to add a command's options to."""
+    return argparse.ArgumentParser(add_help=False)
+
+
+def quiet_options() -> argparse.ArgumentParser:
+    parser = options_parser()
+    parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    return parser
+
+
+def overwrite_options(help_text: str = "replace OUT if it exists") -> argparse.ArgumentParser:
+    parser = options_parser()
+    parser.add_argument("--overwrite", action="store_true", help=help_text)
+    return parser
+
+
+def las_options() -> argparse.ArgumentParser:
+    """``--las`` of the commands that write a drive folder."""
+    parser = options_parser()
+    parser.add_argument(
+        "--las", action="store_true", help="write uncompressed points.las instead of points.laz"
+    )
+    return parser
+
+
+def reconstruction_options() -> argparse.ArgumentParser:
+    """``--params`` and ``--set``; `reconstruction_params` turns them into parameters."""
+    parser = options_parser()
+    parser.add_argument(
+        "--params",
+        type=Path,
+        metavar="JSON",
+        help="reconstruction parameters: a JSON object {stage: {name: value}} (or a "
+        "reconstruction/models.json, whose parameters are used)",
+    )
+    parser.add_argument(
+        "--set",
+        action="append",
+        metavar="STAGE.NAME=VALUE",
+        help="one reconstruction parameter, e.g. pipes.slice_interval_m=0.02 (repeatable)",
+    )
+    return parser
+
+
+def reconstruction_params(args: argparse.Namespace) -> ReconstructionParams:
+    """The defaults, replaced by the file of ``--params``, then by each ``--set``."""
+    import json
+
+    from guardrail_core.errors import InvalidOptionError
+    from guardrail_core.reconstruct.pipeline import ReconstructionParams
+
+    params = ReconstructionParams()
+    if getattr(args, "params", None):
+        try:
+            data = json.loads(Path(args.params).read_text())
+        except (OSError, json.JSONDecodeError) as exc:
+            raise InvalidOptionError(f"--params {args.params}: cannot read it ({exc})") from exc
+        params = ReconstructionParams.from_json(data.get("params", data))
+    return params.with_settings(getattr(args, "set", None) or [])
+
+
+def reconstruction_summary(summary: ReconstructionSummary) -> str:
+    """One line on a reconstruction, as `process` and `reconstruct` print it."""
+    return (
+        f"guardrail runs: {summary.runs} ({summary.reconstructed} reconstructed, "
+        f"{summary.poles_only} poles only, {summary.not_reconstructed} not reconstructed) "
+        f"in {summary.seconds or 0.0:.1f} s"
+    )
+
+
+def image_size(text: str) -> tuple[int, int]:
+    """The argparse type of WIDTHxHEIGHT, each side 64..8192 pixels."""
+    try:
+        width, height = (int(v) for v in text.lower().split("x"))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(
+            f"expected WIDTHxHEIGHT, e.g. 1024x768, got {text!r}"
+        ) from exc
+    if not (64 <= width <= 8192 and 64 <= height <= 8192):
+        raise argparse.ArgumentTypeError("image sides must lie within 64..8192 pixels")
+    return width, height

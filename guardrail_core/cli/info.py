@@ -1,0 +1,26 @@
+"""``guardrail info``: validate a drive folder and describe it."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from guardrail_core.cli import common
+
+
+def add_parser(subparsers: common.Subparsers) -> None:
+    parser = subparsers.add_parser(
+        "info",
+        help="describe a drive folder",
+        description="Validate a drive folder and describe it.",
+    )
+    parser.add_argument("drive", type=Path)
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from guardrail_core.formats.drive import load_drive
+    from guardrail_core.formats.drive_summary import describe_drive
+
+    print(describe_drive(load_drive(args.drive)))
+    return 0

@@ -1,0 +1,1 @@
+"""A run's results out to other tools' formats."""

@@ -1,0 +1,195 @@
+"""The extraction stages (§3) in order: slicing a drive into segments and cropping their images."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from tqdm import tqdm
+
+from guardrail_core.errors import EmptyDriveError
+from guardrail_core.extract.correct import CorrectionParams, SegmentExtents
+from guardrail_core.extract.crops import (
+    CROP_OK,
+    CropChoice,
+    CropParams,
+    choose_images,
+    cut_crops,
+)
+from guardrail_core.extract.lattice import build_lattice
+from guardrail_core.extract.road import OFF_ROAD, ROAD, RoadParams, remove_road
+from guardrail_core.extract.segments import (
+    SegmentParams,
+    Segments,
+    SegmentSummary,
+    absorb_fragments,
+    slice_components,
+    summarise_segments,
+    wireframe_components,
+)
+from guardrail_core.extract.shape_features import segment_features
+from guardrail_core.extract.track import track_coordinates
+from guardrail_core.formats.drive import Drive
+from guardrail_core.formats.run_folder import POINT_OFF_ROAD, POINT_ROAD
+from guardrail_core.params import ParameterError, StageParams
+from guardrail_core.timing import StageTimer
+
+
+@dataclass(frozen=True)
+class ExtractionParams(StageParams):
+    """The parameters of every extraction stage, one :class:`StageParams` per stage."""
+
+    road: RoadParams = field(default_factory=RoadParams)
+    segments: SegmentParams = field(default_factory=SegmentParams)
+    crops: CropParams = field(default_factory=CropParams)
+    correction: CorrectionParams = field(default_factory=CorrectionParams)
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> ExtractionParams:
+        """Parameters from :meth:`to_json` output (``run.json``'s ``params``); a stage missing
+        keeps its defaults, and so does a field missing from a stage.
+
+        Raises
+        ------
+        ParameterError
+            An unknown stage or field, or a value the stage refuses.
+        """
+        if not isinstance(data, Mapping):
+            raise ParameterError(f"ExtractionParams: expected an object of stages, got {data!r}")
+        unknown = sorted(set(data) - set(_STAGES))
+        if unknown:
+            raise ParameterError(
+                f"unknown extraction stage {', '.join(unknown)} (known: {', '.join(_STAGES)})"
+            )
+        stages: dict[str, Any] = {
+            name: _STAGES[name].from_json(value) for name, value in data.items()
+        }
+        return cls(**stages)
+
+
+#: The stages of :class:`ExtractionParams` by field name.
+_STAGES: dict[str, type[StageParams]] = {
+    "road": RoadParams,
+    "segments": SegmentParams,
+    "crops": CropParams,
+    "correction": CorrectionParams,
+}
+
+
+@dataclass(frozen=True)
+class Extraction:
+    """Sliced segments of a drive and their crops (everything before the classifier).
+
+    Attributes
+    ----------
+    point_segment : (N,) int32, segment of every point, POINT_ROAD or POINT_OFF_ROAD
+    segments : the sliced segments
+    summary : their extents
+    features : (S, SEGMENT_FEATURE_DIM) float32, shape and neighbour features
+        (:mod:`guardrail_core.extract.shape_features`)
+    choice : chosen image and rectangle per segment
+    crops : (S, size, size, 3) uint8 RGB, black where there is no crop
+    """
+
+    point_segment: np.ndarray
+    segments: Segments
+    summary: SegmentSummary
+    features: np.ndarray
+    choice: CropChoice
+    crops: np.ndarray
+
+    def extents(self) -> SegmentExtents:
+        return segment_extents(self.segments, self.summary)
+
+
+def segment_extents(segments: Segments, summary: SegmentSummary) -> SegmentExtents:
+    return SegmentExtents(segments.slice_index, summary.lateral, summary.height)
+
+
+def slice_drive(
+    drive: Drive, params: ExtractionParams = ExtractionParams(), *, timer: StageTimer | None = None
+) -> tuple[np.ndarray, Segments, SegmentSummary, np.ndarray]:
+    """The geometric stages of §3.1: road removal, wireframe components (fragments joined to
+    their neighbours), 0.5 m slices, and the segments' shape features.
+
+    Returns ``point_segment`` (N,) int32 (segment, POINT_ROAD or POINT_OFF_ROAD), the segments,
+    their summary and their (S, SEGMENT_FEATURE_DIM) float32 features.
+
+    Raises
+    ------
+    EmptyDriveError
+        The drive has no points.
+    """
+    timer = timer or StageTimer(len(drive.points))
+    points = drive.points
+    n = len(points)
+    if n == 0:
+        raise EmptyDriveError(f"{drive.root}: the drive has no points")
+    with timer.stage("track", points=n):
+        track = track_coordinates(points.xyz, points.gps_time, drive.trajectory)
+    with timer.stage("lattice", points=n):
+        lattice = build_lattice(points.rotation, points.phase, drive.scanner.points_per_rotation)
+    with timer.stage("road_removal", points=n):
+        status = remove_road(points.xyz, track, lattice, params.road)
+        kept = status == 0
+    with timer.stage("components", points=int(kept.sum())):
+        component = wireframe_components(points.xyz, kept, lattice, params.segments)
+        component = absorb_fragments(points.xyz, component, params.segments)
+    with timer.stage("slices", points=int(kept.sum())):
+        segments = slice_components(component, track.station, params.segments, track.lateral)
+        summary = summarise_segments(
+            points.xyz, points.gps_time, track.lateral, track.height, segments
+        )
+    with timer.stage("features", points=int(kept.sum())):
+        features = segment_features(
+            track.station,
+            track.lateral,
+            track.height,
+            points.intensity,
+            segments,
+            segment_extents(segments, summary),
+            params.segments.slice_length_m,
+            params.correction,
+        )
+    point_segment = segments.point_segment.copy()
+    point_segment[status == ROAD] = POINT_ROAD
+    point_segment[status == OFF_ROAD] = POINT_OFF_ROAD
+    return point_segment, segments, summary, features
+
+
+def extract(
+    drive: Drive,
+    crop_size: int,
+    params: ExtractionParams = ExtractionParams(),
+    *,
+    timer: StageTimer | None = None,
+    progress: bool = False,
+) -> Extraction:
+    """Slice a drive (§3.1) and crop every segment's image (§3.2) at ``crop_size`` pixels."""
+    timer = timer or StageTimer(len(drive.points))
+    point_segment, segments, summary, features = slice_drive(drive, params, timer=timer)
+    with timer.stage("crops", points=int(segments.n_points.sum())):
+        with tqdm(
+            total=len(drive.images), desc="choosing images", unit="image", disable=not progress
+        ) as bar:
+            choice = choose_images(
+                drive.points.xyz,
+                segments,
+                summary,
+                drive.images,
+                drive.cameras,
+                params.crops,
+                progress=bar.update,
+            )
+        n_ok = int((choice.status == CROP_OK).sum())
+        with tqdm(total=n_ok, desc="cutting crops", unit="crop", disable=not progress) as bar:
+            crops = cut_crops(
+                lambda i: drive.read_image(drive.images[i]),
+                choice,
+                crop_size,
+                params.crops,
+                progress=bar.update,
+            )
+    return Extraction(point_segment, segments, summary, features, choice, crops)

@@ -1,0 +1,1 @@
+"""The project's own folders: drive, run folder, label store."""

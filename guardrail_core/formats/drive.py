@@ -1,0 +1,482 @@
+"""The drive folder: what a mapping vehicle recorded, and for synthetic drives, the truth.
+
+Layout (documented in ``docs/drive-format.md``)::
+
+    drive.json        format version, CRS, float64 local origin, scanner, file names
+    points.laz        LAS 1.4 (or points.las): gps_time, intensity, extra dims rotation, phase
+    trajectory.csv    time, x, y, z (map coordinates), roll, pitch, yaw (radians)
+    cameras.json      intrinsics, Brown-Conrady distortion, T_vehicle_camera per camera
+    images.json       one record per image: file, camera, gps_time, T_world_camera (map frame)
+    images/<camera>/<n>.jpg
+    truth/            synthetic drives only: points.npz (class, object_id per point),
+                      masks/<camera>/<n>.png (class per pixel), objects.json (exact geometry)
+
+:func:`load_drive` validates everything and raises a named :class:`~guardrail_core.errors.DriveError`
+subclass that says what is wrong. Producers (the simulator, the importers) call
+:func:`write_drive_files` inside :func:`guardrail_core.formats.atomic.staged_folder`, so a failed
+write never leaves a half-written drive and never deletes one of their inputs.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from guardrail_core.errors import (
+    DriveDimensionError,
+    DriveFormatError,
+    MissingDriveFileError,
+    NonFiniteCoordinatesError,
+    TimestampMismatchError,
+)
+from guardrail_core.io.las import read_points, write_points
+from guardrail_core.sensors.camera import Camera
+from guardrail_core.sensors.scanner import ScannerParams
+from guardrail_core.sensors.trajectory import Trajectory
+
+FORMAT_NAME = "guardrail-drive"
+FORMAT_VERSION = "1.1"
+TRAJECTORY_COLUMNS = ("time", "x", "y", "z", "roll", "pitch", "yaw")
+
+
+@dataclass(frozen=True)
+class PointCloud:
+    """Points of a drive, ordered by GPS time.
+
+    Attributes
+    ----------
+    xyz : (N, 3) float64, metres, local frame (drive origin subtracted)
+    gps_time : (N,) float64, seconds
+    intensity : (N,) uint16
+    rotation, phase : (N,) int64, the scan lattice (§3.1)
+    """
+
+    xyz: np.ndarray
+    gps_time: np.ndarray
+    intensity: np.ndarray
+    rotation: np.ndarray
+    phase: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.xyz.shape[0])
+
+
+@dataclass(frozen=True)
+class ImageRecord:
+    """One camera exposure.
+
+    Attributes
+    ----------
+    file : str, path relative to the drive folder
+    camera : str, name of a camera in ``cameras.json``
+    gps_time : float, seconds (mid-exposure)
+    T_world_camera : (4, 4) float64, camera pose in the local frame
+    """
+
+    file: str
+    camera: str
+    gps_time: float
+    T_world_camera: np.ndarray
+
+
+@dataclass(frozen=True)
+class Truth:
+    """Ground truth of a synthetic drive.
+
+    Attributes
+    ----------
+    point_class : (N,) uint8, :class:`~guardrail_core.classes.TruthClass` of every point
+    point_object : (N,) int32, object id of every point (ids of ``objects``; 0 = scenery)
+    objects : list of dict, ``truth/objects.json`` (coordinates in the local frame)
+    mask_files : dict image file -> mask file (relative to the drive folder)
+    """
+
+    point_class: np.ndarray
+    point_object: np.ndarray
+    objects: list[dict]
+    mask_files: dict[str, str]
+
+
+@dataclass
+class Drive:
+    """A drive folder in memory. Images and masks stay on disk until asked for."""
+
+    root: Path
+    crs: str
+    origin: np.ndarray
+    scanner: ScannerParams
+    trajectory: Trajectory
+    points: PointCloud
+    cameras: dict[str, Camera]
+    images: list[ImageRecord]
+    truth: Truth | None = None
+    source: dict = field(default_factory=dict)
+
+    def read_image(self, record: ImageRecord) -> np.ndarray:
+        """The image (H, W, 3) uint8 RGB of a record."""
+        return _read_image(self.root / record.file, cv2.IMREAD_COLOR)[:, :, ::-1].copy()
+
+    def read_mask(self, record: ImageRecord) -> np.ndarray:
+        """The truth class mask (H, W) uint8 of a record (synthetic drives only)."""
+        if self.truth is None:
+            raise MissingDriveFileError(f"{self.root}: this drive has no truth/ folder")
+        return _read_image(self.root / self.truth.mask_files[record.file], cv2.IMREAD_UNCHANGED)
+
+
+def _read_image(path: Path, flags: int) -> np.ndarray:
+    if not path.is_file():
+        raise MissingDriveFileError(f"{path}: image file is missing")
+    image = cv2.imread(str(path), flags)
+    if image is None:
+        raise DriveFormatError(f"{path}: not a readable image")
+    return image
+
+
+# ----------------------------------------------------------------------------------- loading
+
+
+def _require(path: Path, what: str) -> Path:
+    if not path.is_file():
+        raise MissingDriveFileError(f"{path.parent}: {what} {path.name!r} is missing")
+    return path
+
+
+def _read_json(path: Path, what: str) -> object:
+    _require(path, what)
+    try:
+        return json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise DriveFormatError(f"{path}: not valid JSON ({exc})") from exc
+
+
+def _matrix(value: object, shape: tuple[int, ...], where: str) -> np.ndarray:
+    try:
+        array = np.asarray(value, np.float64)
+    except (TypeError, ValueError) as exc:
+        raise DriveFormatError(f"{where}: expected numbers of shape {shape}") from exc
+    if array.shape != shape:
+        raise DriveDimensionError(f"{where}: expected shape {shape}, got {array.shape}")
+    if not np.all(np.isfinite(array)):
+        raise NonFiniteCoordinatesError(f"{where}: contains NaN or infinity")
+    return array
+
+
+def read_trajectory_csv(path: Path, origin: np.ndarray, reference_height_m: float) -> Trajectory:
+    """Read ``trajectory.csv`` (columns ``TRAJECTORY_COLUMNS``; map coordinates) to a local Trajectory."""
+    _require(path, "trajectory")
+    with path.open(newline="") as handle:
+        reader = csv.reader(handle)
+        header = next(reader, None)
+        if header is None or tuple(h.strip() for h in header) != TRAJECTORY_COLUMNS:
+            raise DriveDimensionError(
+                f"{path}: expected the header {','.join(TRAJECTORY_COLUMNS)}, got {header}"
+            )
+        rows = list(reader)
+    try:
+        data = np.array([[float(v) for v in row] for row in rows], np.float64).reshape(
+            -1, len(rows[0]) if rows else 7
+        )
+    except ValueError as exc:
+        raise DriveFormatError(
+            f"{path}: a row is malformed or a value is not a number ({exc})"
+        ) from exc
+    if data.ndim != 2 or data.shape[1] != 7 or data.shape[0] < 2:
+        raise DriveDimensionError(
+            f"{path}: expected at least 2 rows of 7 columns, got shape {data.shape}"
+        )
+    if not np.all(np.isfinite(data)):
+        bad = np.flatnonzero(~np.isfinite(data).all(axis=1))
+        raise NonFiniteCoordinatesError(f"{path}: rows {bad[:5].tolist()} contain NaN or infinity")
+    if np.any(np.diff(data[:, 0]) <= 0):
+        raise TimestampMismatchError(f"{path}: times must be strictly increasing")
+    return Trajectory(
+        time=data[:, 0],
+        position=data[:, 1:4] - origin,
+        attitude=data[:, 4:7],
+        reference_height_m=reference_height_m,
+    )
+
+
+def _camera_from_json(item: dict, where: str) -> Camera:
+    try:
+        name = str(item["name"])
+        width, height = int(item["width"]), int(item["height"])
+        return Camera(
+            name=name,
+            width=width,
+            height=height,
+            K=_matrix(item["K"], (3, 3), f"{where}: {name}.K"),
+            dist=_matrix(item["dist"], (5,), f"{where}: {name}.dist"),
+            T_vehicle_camera=_matrix(
+                item["T_vehicle_camera"], (4, 4), f"{where}: {name}.T_vehicle_camera"
+            ),
+        )
+    except KeyError as exc:
+        raise DriveFormatError(f"{where}: a camera lacks the key {exc.args[0]!r}") from exc
+
+
+def load_drive(root: str | os.PathLike, *, with_truth: bool = True) -> Drive:
+    """Load and validate a drive folder.
+
+    Raises
+    ------
+    MissingDriveFileError, DriveFormatError, DriveDimensionError, TimestampMismatchError,
+    NonFiniteCoordinatesError
+        Each names the file and what is wrong with it.
+    """
+    root = Path(root)
+    if not root.is_dir():
+        raise MissingDriveFileError(f"{root}: no such drive folder")
+    meta = _read_json(root / "drive.json", "drive description")
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT_NAME:
+        raise DriveFormatError(f"{root / 'drive.json'}: not a {FORMAT_NAME} description")
+    version = str(meta.get("format_version"))
+    if version.split(".")[0] != FORMAT_VERSION.split(".")[0]:
+        raise DriveFormatError(
+            f"{root / 'drive.json'}: format_version {version} is not readable by this version "
+            f"(reads {FORMAT_VERSION.split('.')[0]}.x)"
+        )
+    try:
+        origin = _matrix(meta["origin"], (3,), "drive.json: origin")
+        crs = str(meta["crs"])
+        scanner = ScannerParams.from_json(meta["scanner"])
+        files = meta["files"]
+        reference_height = float(meta["trajectory"]["reference_height_m"])
+    except KeyError as exc:
+        raise DriveFormatError(f"{root / 'drive.json'}: lacks the key {exc.args[0]!r}") from exc
+
+    trajectory = read_trajectory_csv(root / files["trajectory"], origin, reference_height)
+    points = _load_points(root / files["points"], origin, scanner)
+    t_lo, t_hi = trajectory.time[0], trajectory.time[-1]
+    if len(points) and (points.gps_time.min() < t_lo or points.gps_time.max() > t_hi):
+        raise TimestampMismatchError(
+            f"{root}: points span GPS time {points.gps_time.min():.6f}..{points.gps_time.max():.6f} s "
+            f"but the trajectory covers only {t_lo:.6f}..{t_hi:.6f} s"
+        )
+
+    camera_list = _read_json(root / files["cameras"], "camera calibration")
+    if not isinstance(camera_list, list):
+        raise DriveFormatError(f"{root / files['cameras']}: expected a list of cameras")
+    cameras = {
+        c.name: c for c in (_camera_from_json(item, files["cameras"]) for item in camera_list)
+    }
+    images = _load_images(root, files["images"], cameras, origin, (t_lo, t_hi))
+
+    truth = None
+    if with_truth and meta.get("truth"):
+        truth = _load_truth(root / meta["truth"], len(points), images)
+    return Drive(
+        root=root,
+        crs=crs,
+        origin=origin,
+        scanner=scanner,
+        trajectory=trajectory,
+        points=points,
+        cameras=cameras,
+        images=images,
+        truth=truth,
+        source=meta.get("source", {}),
+    )
+
+
+def _load_points(path: Path, origin: np.ndarray, scanner: ScannerParams) -> PointCloud:
+    _require(path, "point cloud")
+    data = read_points(path, origin)
+    if "rotation" in data and "phase" in data:
+        rotation, phase = data["rotation"], data["phase"]
+    else:  # §3.1: the lattice follows from GPS time and the scanner parameters.
+        rotation, phase = scanner.lattice_from_gps_time(data["gps_time"])
+    return PointCloud(data["xyz"], data["gps_time"], data["intensity"], rotation, phase)
+
+
+def _load_images(
+    root: Path, name: str, cameras: dict[str, Camera], origin: np.ndarray, span: tuple[float, float]
+) -> list[ImageRecord]:
+    items = _read_json(root / name, "image list")
+    if not isinstance(items, list):
+        raise DriveFormatError(f"{root / name}: expected a list of image records")
+    images = []
+    for i, item in enumerate(items):
+        where = f"{name}[{i}]"
+        try:
+            file, camera, gps_time = str(item["file"]), str(item["camera"]), float(item["gps_time"])
+            pose = _matrix(item["T_world_camera"], (4, 4), f"{where}.T_world_camera")
+        except KeyError as exc:
+            raise DriveFormatError(f"{where}: lacks the key {exc.args[0]!r}") from exc
+        if camera not in cameras:
+            raise DriveFormatError(f"{where}: camera {camera!r} has no calibration in cameras.json")
+        if not np.isfinite(gps_time):
+            raise NonFiniteCoordinatesError(f"{where}: gps_time is not finite")
+        if not span[0] <= gps_time <= span[1]:
+            raise TimestampMismatchError(
+                f"{where}: image time {gps_time:.6f} s lies outside the trajectory "
+                f"{span[0]:.6f}..{span[1]:.6f} s"
+            )
+        _require(root / file, "image")
+        pose = pose.copy()
+        pose[:3, 3] -= origin
+        images.append(ImageRecord(file, camera, gps_time, pose))
+    return images
+
+
+def _load_truth(folder: Path, n_points: int, images: list[ImageRecord]) -> Truth:
+    npz_path = _require(folder / "points.npz", "truth of the points")
+    with np.load(npz_path, allow_pickle=False) as npz:
+        if "class" not in npz or "object_id" not in npz:
+            raise DriveFormatError(f"{npz_path}: needs the arrays 'class' and 'object_id'")
+        point_class, point_object = npz["class"], npz["object_id"]
+    if point_class.shape != (n_points,) or point_object.shape != (n_points,):
+        raise DriveDimensionError(
+            f"{npz_path}: truth has {point_class.shape[0]} classes and {point_object.shape[0]} "
+            f"object ids for {n_points} points"
+        )
+    objects = _read_json(folder / "objects.json", "truth geometry")
+    if not isinstance(objects, list):
+        raise DriveFormatError(f"{folder / 'objects.json'}: expected a list of objects")
+    mask_files = {}
+    for record in images:
+        mask = Path("truth") / "masks" / Path(record.file).relative_to("images").with_suffix(".png")
+        mask_files[record.file] = str(mask)
+    return Truth(
+        point_class.astype(np.uint8), point_object.astype(np.int32), list(objects), mask_files
+    )
+
+
+# ----------------------------------------------------------------------------------- saving
+
+
+def camera_to_json(camera: Camera) -> dict:
+    return {
+        "name": camera.name,
+        "width": camera.width,
+        "height": camera.height,
+        "K": camera.K.tolist(),
+        "dist": camera.dist.tolist(),
+        "dist_model": "brown-conrady (k1, k2, p1, p2, k3), OpenCV order",
+        "T_vehicle_camera": camera.T_vehicle_camera.tolist(),
+    }
+
+
+def write_trajectory_csv(path: Path, trajectory: Trajectory, origin: np.ndarray) -> None:
+    world = trajectory.position + origin
+    data = np.column_stack([trajectory.time, world, trajectory.attitude])
+    with path.open("w", newline="") as handle:
+        handle.write(",".join(TRAJECTORY_COLUMNS) + "\n")
+        np.savetxt(
+            handle,
+            data,
+            delimiter=",",
+            fmt=["%.6f", "%.4f", "%.4f", "%.4f", "%.9f", "%.9f", "%.9f"],
+        )
+
+
+#: Folders of a drive besides the files ``drive.json`` names; ``review/`` holds the review
+#: app's labels (``formats.label_store``), which no command may delete either.
+DRIVE_FOLDERS = ("images", "truth", "review")
+_DEFAULT_FILES = {
+    "points": "points.laz",
+    "trajectory": "trajectory.csv",
+    "cameras": "cameras.json",
+    "images": "images.json",
+}
+
+
+def drive_parts(root: str | os.PathLike) -> list[Path]:
+    """Every file and folder of the drive folder ``root``: ``drive.json``, the files it names
+    (their usual names when it cannot be read) and :data:`DRIVE_FOLDERS`.
+
+    A command that reads a drive lists these as its inputs
+    (:func:`guardrail_core.formats.atomic.check_output`) rather than the folder itself: an output
+    may then live inside the drive folder (``DRIVE/run``) but never replace a part of the drive.
+    """
+    root = Path(root)
+    names = dict(_DEFAULT_FILES)
+    try:
+        meta = json.loads((root / "drive.json").read_text())
+        names.update({key: str(value) for key, value in meta["files"].items()})
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        pass  # load_drive refuses a broken drive.json; here its parts keep their usual names
+    return [root / "drive.json", *(root / name for name in names.values())] + [
+        root / name for name in DRIVE_FOLDERS
+    ]
+
+
+def write_drive_files(
+    folder: Path,
+    *,
+    crs: str,
+    origin: np.ndarray,
+    scanner: ScannerParams,
+    trajectory: Trajectory,
+    points: PointCloud,
+    cameras: list[Camera],
+    images: list[ImageRecord],
+    truth: Truth | None,
+    source: dict,
+    compress: bool = True,
+) -> None:
+    """Write the metadata, trajectory and points of a drive into ``folder``.
+
+    Image and mask pixels are written by the producer as it goes (they do not fit in memory for
+    long drives); ``images`` carries their records with poses in the local frame.
+    """
+    points_name = "points.laz" if compress else "points.las"
+    meta = {
+        "format": FORMAT_NAME,
+        "format_version": FORMAT_VERSION,
+        "units": {"length": "metre", "angle": "radian", "time": "GPS seconds"},
+        "crs": crs,
+        "origin": [float(v) for v in origin],
+        "scanner": scanner.to_json(),
+        "trajectory": {
+            "reference_height_m": trajectory.reference_height_m,
+            "attitude": "roll, pitch, yaw; R_world_vehicle = Rz(yaw) Ry(pitch) Rx(roll)",
+            "vehicle_frame": "x forward, y left, z up",
+        },
+        "files": {
+            "points": points_name,
+            "trajectory": "trajectory.csv",
+            "cameras": "cameras.json",
+            "images": "images.json",
+        },
+        "truth": "truth" if truth is not None else None,
+        "source": source,
+    }
+    (folder / "drive.json").write_text(json.dumps(meta, indent=2))
+    write_trajectory_csv(folder / "trajectory.csv", trajectory, origin)
+    write_points(
+        folder / points_name,
+        points.xyz,
+        origin,
+        points.gps_time,
+        points.intensity,
+        points.rotation,
+        points.phase,
+    )
+    (folder / "cameras.json").write_text(json.dumps([camera_to_json(c) for c in cameras], indent=2))
+    records = []
+    for record in images:
+        pose = record.T_world_camera.copy()
+        pose[:3, 3] += origin
+        records.append(
+            {
+                "file": record.file,
+                "camera": record.camera,
+                "gps_time": record.gps_time,
+                "T_world_camera": pose.tolist(),
+            }
+        )
+    (folder / "images.json").write_text(json.dumps(records, indent=1))
+    if truth is not None:
+        (folder / "truth").mkdir(exist_ok=True)
+        np.savez_compressed(
+            folder / "truth" / "points.npz",
+            **{"class": truth.point_class, "object_id": truth.point_object},  # type: ignore[arg-type]
+        )
+        (folder / "truth" / "objects.json").write_text(json.dumps(truth.objects, indent=1))

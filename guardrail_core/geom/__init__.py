@@ -1,0 +1,1 @@
+"""Geometry shared by every stage: frames and rotations, mesh primitives."""

@@ -1,0 +1,222 @@
+"""One way to state a stage's parameters: each field's unit and allowed range, checked once.
+
+Every stage has one frozen dataclass of parameters derived from :class:`StageParams`, whose
+fields are declared with :func:`param`::
+
+    @dataclass(frozen=True)
+    class PoleParams(StageParams):
+        section_step_m: float = param(0.05, unit="m", gt=0, le=0.5, doc="§4.1: section spacing")
+
+Names carry their unit as a suffix (``_m`` metres, ``_deg`` degrees, ``_s`` seconds, ``_px``
+pixels, ``_mm`` millimetres, ``_hz`` per second); counts, ratios and switches have none. The
+unit is also in the field's metadata, where ``--help`` texts, the docs and the review app's
+sliders read it. Construction checks every field (type, finiteness, range, choices) and then the
+class's own :meth:`StageParams.check_relations`, and raises :class:`ParameterError` naming the
+class, the field, what is allowed and what came.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import typing
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, ClassVar, TypeVar
+
+from guardrail_core.errors import InvalidOptionError
+
+P = TypeVar("P", bound="StageParams")
+
+_UNIT_SUFFIXES = ("_m", "_deg", "_s", "_px", "_mm", "_hz")
+
+
+class ParameterError(InvalidOptionError):
+    """A parameter is of the wrong type, not finite, outside its range, or unknown."""
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """What a parameter field allows (read from the metadata :func:`param` stores)."""
+
+    name: str
+    unit: str
+    ge: float | None
+    gt: float | None
+    le: float | None
+    lt: float | None
+    choices: tuple[Any, ...] | None
+    finite: bool
+    doc: str
+
+    def range_text(self) -> str:
+        """The allowed range as text, e.g. ``(0, 0.5] m``."""
+        if self.choices is not None:
+            return "one of " + ", ".join(repr(c) for c in self.choices)
+        low = (
+            f"({self.gt:g}"
+            if self.gt is not None
+            else f"[{self.ge:g}"
+            if self.ge is not None
+            else "(-inf"
+        )
+        high = (
+            f"{self.lt:g})"
+            if self.lt is not None
+            else f"{self.le:g}]"
+            if self.le is not None
+            else "inf)"
+        )
+        return f"{low}, {high}" + (f" {self.unit}" if self.unit else "")
+
+
+def param(
+    default: Any,
+    *,
+    unit: str = "",
+    ge: float | None = None,
+    gt: float | None = None,
+    le: float | None = None,
+    lt: float | None = None,
+    choices: Sequence[Any] | None = None,
+    finite: bool = True,
+    doc: str = "",
+) -> Any:
+    """A parameter field: its default, unit and allowed range (``ge``/``gt`` below, ``le``/``lt``
+    above; ``choices`` for strings). ``finite=False`` lets a float be infinite ("no limit")."""
+    metadata = {
+        "unit": unit,
+        "ge": ge,
+        "gt": gt,
+        "le": le,
+        "lt": lt,
+        "choices": tuple(choices) if choices is not None else None,
+        "finite": finite,
+        "doc": doc,
+    }
+    return dataclasses.field(default=default, metadata=metadata)
+
+
+@dataclass(frozen=True)
+class StageParams:
+    """Base of every stage's parameters: validated once, at construction.
+
+    Subclasses declare fields with :func:`param` and may add cross-field rules in
+    :meth:`check_relations`. ``renamed`` maps names used by earlier versions to today's, so that
+    parameters saved in older run folders still load.
+    """
+
+    renamed: ClassVar[Mapping[str, str]] = {}
+
+    def __post_init__(self) -> None:
+        hints = _type_hints(type(self))
+        for f in dataclasses.fields(self):
+            if "unit" not in f.metadata:
+                continue  # a nested parameters object checks itself
+            value = _checked(type(self).__name__, f, hints[f.name], getattr(self, f.name))
+            object.__setattr__(self, f.name, value)
+        self.check_relations()
+
+    def check_relations(self) -> None:
+        """Rules between fields (a minimum below its maximum); raise :class:`ParameterError`."""
+
+    def fail(self, message: str) -> typing.NoReturn:
+        """Raise :class:`ParameterError` for a rule of :meth:`check_relations`."""
+        raise ParameterError(f"{type(self).__name__}: {message}")
+
+    @classmethod
+    def specs(cls) -> list[ParamSpec]:
+        """Every parameter of the class with its unit and range, in declaration order."""
+        return [
+            ParamSpec(name=f.name, **{k: f.metadata[k] for k in _SPEC_KEYS})
+            for f in dataclasses.fields(cls)
+            if "unit" in f.metadata
+        ]
+
+    def to_json(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_json(cls: type[P], data: Mapping[str, Any]) -> P:
+        """Parameters from :meth:`to_json` output; missing names keep their defaults, names of
+        earlier versions (``renamed``) are read as today's.
+
+        Raises
+        ------
+        ParameterError
+            An unknown name, or a value the class refuses.
+        """
+        if not isinstance(data, Mapping):
+            raise ParameterError(f"{cls.__name__}: expected an object of parameters, got {data!r}")
+        names = {f.name: f for f in dataclasses.fields(cls)}
+        values: dict[str, Any] = {}
+        for key, value in data.items():
+            name = cls.renamed.get(key, key)
+            if name not in names:
+                raise ParameterError(
+                    f"unknown parameter {cls.__name__}.{key} (known: {', '.join(sorted(names))})"
+                )
+            default = names[name].default
+            if isinstance(default, tuple) and isinstance(value, list):
+                value = tuple(value)  # JSON has lists where the parameters have tuples
+            values[name] = value
+        return cls(**values)
+
+
+_SPEC_KEYS = ("unit", "ge", "gt", "le", "lt", "choices", "finite", "doc")
+
+
+_HINTS: dict[type, dict[str, Any]] = {}
+
+
+def _type_hints(cls: type) -> dict[str, Any]:
+    """The class's field types, resolved once per class (annotations are strings here)."""
+    if cls not in _HINTS:
+        _HINTS[cls] = typing.get_type_hints(cls)
+    return _HINTS[cls]
+
+
+def _checked(owner: str, f: dataclasses.Field, kind: Any, value: Any) -> Any:
+    """``value`` as the field's type, or :class:`ParameterError`."""
+    meta = f.metadata
+    where = f"{owner}.{f.name}"
+    if kind is bool:
+        if not isinstance(value, bool):
+            raise ParameterError(f"{where} must be true or false, got {value!r}")
+        return value
+    if kind is int:
+        if isinstance(value, float) and value.is_integer():
+            value = int(value)
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ParameterError(f"{where} must be an integer, got {value!r}")
+    elif kind is float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ParameterError(f"{where} must be a number, got {value!r}")
+        value = float(value)
+        if math.isnan(value) or (meta["finite"] and math.isinf(value)):
+            raise ParameterError(f"{where} must be a finite number, got {value!r}")
+    elif kind is str and not isinstance(value, str):
+        raise ParameterError(f"{where} must be a string, got {value!r}")
+    if meta["choices"] is not None:
+        if value not in meta["choices"]:
+            choices = ", ".join(repr(c) for c in meta["choices"])
+            raise ParameterError(f"{where} must be one of {choices}, got {value!r}")
+        return value
+    if isinstance(value, int | float) and not _in_range(value, meta):
+        spec = ParamSpec(name=f.name, **{k: meta[k] for k in _SPEC_KEYS})
+        raise ParameterError(f"{where} must lie within {spec.range_text()}, got {value!r}")
+    return value
+
+
+def _in_range(value: float, meta: Mapping[str, Any]) -> bool:
+    return not (
+        (meta["ge"] is not None and value < meta["ge"])
+        or (meta["gt"] is not None and value <= meta["gt"])
+        or (meta["le"] is not None and value > meta["le"])
+        or (meta["lt"] is not None and value >= meta["lt"])
+    )
+
+
+def has_unit_suffix(name: str) -> bool:
+    """Whether a parameter's name ends in one of the unit suffixes."""
+    return name.endswith(_UNIT_SUFFIXES)

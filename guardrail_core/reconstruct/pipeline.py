@@ -1,0 +1,518 @@
+"""Runs the reconstruction stages (§4) on a drive's guardrail points and writes the results.
+
+guardrail points -> runs -> poles (§4.1) -> units (§4.1) -> superimposition with ICP (§4.2)
+-> pipes (§4.3) or beam section (§4.4) -> the unit copied between the poles -> meshes + inventory.
+
+What it writes into a run folder::
+
+    RUN_DIR/reconstruction/
+      models.json         format version, parameters, every run: poles, unit frames, unit model
+      superimposed.npz    per run the superimposed unit points (unit coordinates), for re-runs
+      inventory.geojson   one LineString per run along its poles, properties = the inventory row
+      inventory.csv       the same rows for spreadsheets
+      meshes/run_NNN.{glb,ply,obj}, meshes/guardrails.glb
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import time
+import typing
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy.spatial import cKDTree
+from tqdm import tqdm
+
+from guardrail_core.errors import (
+    OutputExistsError,
+    ReconstructionError,
+)
+from guardrail_core.formats.atomic import staged_folder
+from guardrail_core.formats.reconstruction_folder import (
+    RECONSTRUCTION_FORMAT_VERSION,
+    ReconstructionFolder,
+    superimposed_points_key,
+    superimposed_unit_key,
+)
+from guardrail_core.formats.run_folder_paths import RunFolder
+from guardrail_core.formats.run_info import ReconstructionSummary
+from guardrail_core.io.meshes import write_meshes
+from guardrail_core.params import ParameterError, StageParams
+from guardrail_core.reconstruct.assemble import run_mesh
+from guardrail_core.reconstruct.beams import BeamParams, reconstruct_beam, unit_type
+from guardrail_core.reconstruct.inventory import (
+    inventory_rows,
+    write_inventory_csv,
+    write_inventory_geojson,
+)
+from guardrail_core.reconstruct.model import RunModel, UnitModel
+from guardrail_core.reconstruct.model_json import run_model_to_json
+from guardrail_core.reconstruct.pipes import PipeHistogram, PipeParams, reconstruct_pipes
+from guardrail_core.reconstruct.poles import PoleParams, detect_poles
+from guardrail_core.reconstruct.register import RegisterParams, Superimposition, superimpose
+from guardrail_core.reconstruct.runs import RunParams, group_runs
+from guardrail_core.reconstruct.sweep import SweepParams
+from guardrail_core.reconstruct.units import UnitParams, order_poles, split_units
+
+
+@dataclass(frozen=True)
+class ReconstructionParams(StageParams):
+    """The parameters of every reconstruction stage, each with the paper's defaults.
+
+    Each field is one stage's parameters: its name is the STAGE of ``--set STAGE.NAME=VALUE``
+    and the key in ``models.json``'s ``params``.
+    """
+
+    runs: RunParams = field(default_factory=RunParams)
+    poles: PoleParams = field(default_factory=PoleParams)
+    units: UnitParams = field(default_factory=UnitParams)
+    register: RegisterParams = field(default_factory=RegisterParams)
+    pipes: PipeParams = field(default_factory=PipeParams)
+    beams: BeamParams = field(default_factory=BeamParams)
+    sweep: SweepParams = field(default_factory=SweepParams)
+
+    @classmethod
+    def stage_classes(cls) -> dict[str, type[StageParams]]:
+        """Each stage's name and its parameters' class, in the order the stages run."""
+        hints = typing.get_type_hints(cls)
+        return {f.name: hints[f.name] for f in dataclasses.fields(cls)}
+
+    def check_relations(self) -> None:
+        for stage, kind in self.stage_classes().items():
+            value = getattr(self, stage)
+            if not isinstance(value, kind):
+                self.fail(f"{stage} must be {kind.__name__}, got {type(value).__name__}")
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> ReconstructionParams:
+        """Parameters from :meth:`to_json` output (``{stage: {name: value}}``); missing stages
+        and names keep their defaults, names of earlier versions are read as today's (each
+        stage's ``renamed``).
+
+        Raises
+        ------
+        ParameterError
+            An unknown stage or name (naming both), or a value the stage refuses.
+        """
+        if not isinstance(data, Mapping):
+            raise ParameterError(f"expected an object of stages, got {data!r}")
+        stages = cls.stage_classes()
+        parts: dict[str, Any] = {}  # each stage's class is that of its field
+        for stage, values in data.items():
+            if stage not in stages:
+                raise ParameterError(
+                    f"unknown reconstruction stage {stage!r} (known: {', '.join(stages)})"
+                )
+            try:
+                parts[stage] = stages[stage].from_json(values)
+            except ParameterError as exc:
+                raise ParameterError(f"{stage}: {exc}") from exc
+        return cls(**parts)
+
+    def with_settings(self, settings: Sequence[str]) -> ReconstructionParams:
+        """These parameters with ``STAGE.NAME=VALUE`` settings applied (the CLI's ``--set``).
+
+        NAME is a field of the stage's parameters (or a name of an earlier version); VALUE is
+        read as the field's type: an integer, a number, ``true``/``false``, text, or JSON for a
+        tuple. Each stage is checked once, after all its settings, so their order does not
+        matter.
+
+        Raises
+        ------
+        ParameterError
+            A setting not of that form, an unknown stage or name, or a value of the wrong type
+            or out of range; the message names ``STAGE.NAME``.
+        """
+        stages = self.stage_classes()
+        changes: dict[str, dict[str, Any]] = {}
+        for setting in settings:
+            key, sep, text = setting.partition("=")
+            stage, dot, name = key.strip().partition(".")
+            if not sep or not dot:
+                raise ParameterError(f"expected STAGE.NAME=VALUE, got {setting!r}")
+            if stage not in stages:
+                raise ParameterError(
+                    f"unknown reconstruction stage {stage!r} in {setting!r} "
+                    f"(known: {', '.join(stages)})"
+                )
+            kind = stages[stage]
+            name = kind.renamed.get(name, name)
+            hints = typing.get_type_hints(kind)
+            names = [f.name for f in dataclasses.fields(kind)]
+            if name not in names:
+                raise ParameterError(
+                    f"unknown reconstruction parameter {stage}.{name} (known: {', '.join(names)})"
+                )
+            value = _setting_value(f"{stage}.{name}", hints[name], text.strip())
+            changes.setdefault(stage, {})[name] = value
+        parts = {}
+        for stage, values in changes.items():
+            try:
+                parts[stage] = dataclasses.replace(getattr(self, stage), **values)
+            except ParameterError as exc:
+                raise ParameterError(f"{stage}: {exc}") from exc
+        return dataclasses.replace(self, **parts)
+
+
+#: How each type of parameter is read from text, for the error that names what was expected.
+_KIND_WORDS = {bool: "true or false", int: "an integer", float: "a number"}
+
+
+def _setting_value(where: str, kind: Any, text: str) -> Any:
+    """The text of a ``--set`` value as the parameter's type ``kind`` (its annotation).
+
+    Raises
+    ------
+    ParameterError
+        ``text`` is not a value of that type; names ``where`` (``STAGE.NAME``).
+    """
+    try:
+        if kind is bool:
+            word = text.lower()
+            if word not in ("true", "false"):
+                raise ValueError(text)
+            return word == "true"
+        if kind is int:
+            try:
+                return int(text)
+            except ValueError:
+                return float(text)  # 16.0 reads as 16; the stage refuses 16.5 by name
+        if kind is float:
+            return float(text)
+        if kind is str:
+            return text
+        value = json.loads(text)  # a tuple (colours) as a JSON list
+        return tuple(value) if isinstance(value, list) else value
+    except ValueError as exc:
+        what = _KIND_WORDS.get(kind, "a JSON value")
+        raise ParameterError(f"{where} must be {what}, got {text!r}") from exc
+
+
+@dataclass
+class Reconstruction:
+    """Every reconstructed run of a drive, with what re-running a unit model needs.
+
+    Attributes
+    ----------
+    runs : one model per run of guardrail points, in run id order
+    superimposed : per run, the superimposed unit points (None where there were no units)
+    """
+
+    runs: list[RunModel]
+    superimposed: list[Superimposition | None]
+
+
+@dataclass(frozen=True)
+class UnitReconstruction:
+    """A unit model and, for pipes, the x histogram its vertical pipes came from (Fig. 14)."""
+
+    model: UnitModel
+    histogram: PipeHistogram | None
+
+
+def reconstruct_unit(
+    points: np.ndarray,
+    length: float,
+    *,
+    pole_radius: float,
+    pole_height: float,
+    n_units: int,
+    params: ReconstructionParams = ReconstructionParams(),
+) -> UnitReconstruction:
+    """The unit model of superimposed unit points: beam section or pipes (§4.3-4.4).
+
+    This is the step the review app re-runs when an operator moves a threshold.
+
+    Parameters
+    ----------
+    points : (N, 3) float64, unit coordinates (metres), pole points removed
+    length : float, metres between the pole axes
+    """
+    kind = unit_type(points, length, params.beams)
+    if kind == "beam":
+        beam = reconstruct_beam(points, length, pole_radius, params.beams)
+        model = UnitModel(
+            type="beam",
+            length=length,
+            section=beam.section,
+            pole_radius=pole_radius,
+            pole_height=pole_height,
+            n_units=n_units,
+            notes=tuple(beam.notes),
+        )
+        return UnitReconstruction(model, None)
+    pipes = reconstruct_pipes(points, length, pole_radius, params.pipes)
+    model = UnitModel(
+        type="pipe",
+        length=length,
+        pipes=tuple(pipes.pipes),
+        pole_radius=pole_radius,
+        pole_height=pole_height,
+        n_units=n_units,
+        notes=tuple(pipes.notes),
+    )
+    return UnitReconstruction(model, pipes.histogram)
+
+
+def unit_model(
+    points: np.ndarray,
+    length: float,
+    *,
+    pole_radius: float,
+    pole_height: float,
+    n_units: int,
+    params: ReconstructionParams = ReconstructionParams(),
+) -> UnitModel:
+    """The unit model alone (see :func:`reconstruct_unit`)."""
+    return reconstruct_unit(
+        points,
+        length,
+        pole_radius=pole_radius,
+        pole_height=pole_height,
+        n_units=n_units,
+        params=params,
+    ).model
+
+
+def reconstruct_run(
+    xyz: np.ndarray,
+    ground: np.ndarray,
+    toward_road: np.ndarray,
+    *,
+    run_id: int,
+    params: ReconstructionParams = ReconstructionParams(),
+    max_units: int | None = None,
+) -> tuple[RunModel, Superimposition | None]:
+    """Reconstruct one run of guardrail points.
+
+    Parameters
+    ----------
+    xyz : (N, 3) float64, metres: the run's guardrail points, local frame
+    ground : (G, 3) float64: ground points near the run (for the poles' foot)
+    toward_road : (3,) horizontal direction from the run toward the road
+    run_id : the run's number
+    max_units : superimpose only the first this many units (the experiment of §5.2)
+
+    Returns
+    -------
+    The run model (whose ``notes`` say what could not be done) and the superimposition.
+    """
+    detection = detect_poles(xyz, ground, params.poles)
+    notes: list[str] = []
+    if len(detection.poles) < 2:
+        notes.append(
+            f"{len(detection.poles)} pole(s) detected: a unit needs two, so no unit shape "
+            "was reconstructed"
+        )
+        return RunModel(
+            run_id, list(detection.poles), [], None, np.zeros(0, bool), len(xyz), notes
+        ), None
+    poles = order_poles(detection.poles, toward_road)
+    # Pole points belong to the poles, not to the unit shape between them.
+    rails = xyz[~detection.point_is_pole]
+    split = split_units(rails, poles, params.units)
+    notes.extend(split.notes)
+    poles, frames = split.poles, split.frames  # with virtual poles where one was missing
+    unit_points = [frames[u].to_unit(rails[split.unit_of_point == u]) for u in range(len(frames))]
+    unit_points = [p[p[:, 1] >= params.units.ground_clearance_m] for p in unit_points]
+    # Units beyond the detected end poles take the model but do not shape it: their x is
+    # only extrapolated (unless no unit is anchored at all).
+    chosen = np.flatnonzero(split.anchored) if split.anchored.any() else np.arange(len(frames))
+    if max_units is not None:
+        chosen = chosen[:max_units]
+    used = [unit_points[u] for u in chosen]
+    length = float(np.median([f.length for f in frames]))
+    stacked = np.concatenate(used)
+    beam = len(used) > 1 and len(stacked) > 0 and unit_type(stacked, length, params.beams) == "beam"
+    superimposed = superimpose(used, params.register, beam=beam)
+    superimposed = dataclasses.replace(
+        superimposed, unit_of_point=chosen[superimposed.unit_of_point].astype(np.int32)
+    )
+    unregistered = int((~superimposed.registered).sum())
+    if unregistered and len(used) > 1:
+        notes.append(f"{unregistered} of {len(used)} units kept their rough alignment (ICP failed)")
+    if len(used) == 1:
+        notes.append("a run of one unit: the model rests on a single unit's points")
+    registered = np.zeros(len(frames), bool)
+    registered[chosen] = superimposed.registered
+    if len(superimposed.points) == 0:
+        notes.append("no guardrail points between the poles")
+        return RunModel(run_id, poles, frames, None, registered, len(xyz), notes), superimposed
+    model = unit_model(
+        superimposed.points,
+        length,
+        pole_radius=float(np.median([p.radius for p in poles])),
+        pole_height=float(np.median([p.height for p in poles])),
+        n_units=len(used),
+        params=params,
+    )
+    return RunModel(run_id, poles, frames, model, registered, len(xyz), notes), superimposed
+
+
+def reconstruct_guardrails(
+    xyz: np.ndarray,
+    guardrail: np.ndarray,
+    ground: np.ndarray,
+    trajectory: np.ndarray,
+    *,
+    params: ReconstructionParams = ReconstructionParams(),
+    max_units: int | None = None,
+    progress: bool = False,
+) -> Reconstruction:
+    """Reconstruct every guardrail run of a drive.
+
+    Parameters
+    ----------
+    xyz : (N, 3) float64, metres: every point of the drive, local frame
+    guardrail : (N,) bool: the points labelled guardrail
+    ground : (N,) bool: the points of the road surface (the ground of the poles)
+    trajectory : (T, 3) float64: the vehicle's positions (which side the road is on)
+    max_units : superimpose only the first this many units of each run (§5.2)
+    """
+    xyz = np.asarray(xyz, np.float64)
+    if xyz.ndim != 2 or xyz.shape[1] != 3:
+        raise ReconstructionError(f"points must be (N, 3), got {xyz.shape}")
+    points = xyz[np.asarray(guardrail, bool)]
+    if not np.isfinite(points).all():
+        raise ReconstructionError("guardrail points contain NaN or infinity")
+    run_of_point = group_runs(points, params.runs)
+    n_runs = int(run_of_point.max()) + 1 if len(run_of_point) else 0
+    ground_xyz = xyz[np.asarray(ground, bool)]
+    ground_tree = cKDTree(ground_xyz[:, :2]) if len(ground_xyz) else None
+    track = np.asarray(trajectory, np.float64)[:, :2]
+    track_tree = cKDTree(track)
+    runs, superimposed = [], []
+    for r in tqdm(range(n_runs), desc="reconstruct", unit="run", disable=not progress):
+        run_xyz = points[run_of_point == r]
+        near_ground = np.zeros((0, 3))
+        if ground_tree is not None:
+            step, reach = params.runs.ground_query_step, params.runs.ground_reach_m
+            lists = ground_tree.query_ball_point(run_xyz[::step, :2], reach)
+            index = np.unique(np.concatenate([np.asarray(i, np.int64) for i in lists]))
+            near_ground = ground_xyz[index]
+        centre = run_xyz.mean(axis=0)
+        toward = np.zeros(3)
+        toward[:2] = track[track_tree.query(centre[:2])[1]] - centre[:2]
+        model, sup = reconstruct_run(
+            run_xyz, near_ground, toward, run_id=r, params=params, max_units=max_units
+        )
+        runs.append(model)
+        superimposed.append(sup)
+    return Reconstruction(runs, superimposed)
+
+
+def guardrail_mask(point_segment: np.ndarray, label: np.ndarray) -> np.ndarray:
+    """(N,) bool: points of segments labelled guardrail (after label correction)."""
+    point_segment = np.asarray(point_segment)
+    out = np.zeros(len(point_segment), bool)
+    inside = point_segment >= 0
+    out[inside] = np.asarray(label, bool)[point_segment[inside]]
+    return out
+
+
+def write_reconstruction(
+    folder: Path,
+    reconstruction: Reconstruction,
+    *,
+    params: ReconstructionParams,
+    origin: np.ndarray,
+    crs: str,
+    seconds: float | None = None,
+) -> ReconstructionSummary:
+    """Write models, superimposed points, inventory and meshes into ``folder`` (a new or empty
+    folder: a staging folder of :func:`guardrail_core.formats.atomic.staged_folder`).
+
+    Returns
+    -------
+    A summary: counts of runs by status, the files written and ``seconds``.
+    """
+    folder = Path(folder)
+    layout = ReconstructionFolder(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    if any(folder.iterdir()):
+        raise OutputExistsError(f"{folder}: is not empty; a reconstruction is written whole")
+    runs = reconstruction.runs
+    layout.models_file.write_text(
+        json.dumps(
+            {
+                "format_version": RECONSTRUCTION_FORMAT_VERSION,
+                "params": params.to_json(),
+                "seconds": seconds,
+                "runs": [run_model_to_json(r) for r in runs],
+            },
+            indent=1,
+        )
+        + "\n"
+    )
+    arrays: dict[str, Any] = {}
+    for run, sup in zip(runs, reconstruction.superimposed, strict=True):
+        if sup is not None:
+            arrays[superimposed_points_key(run.run_id)] = sup.points.astype(np.float32)
+            arrays[superimposed_unit_key(run.run_id)] = sup.unit_of_point.astype(np.int16)
+    np.savez_compressed(layout.superimposed_file, **arrays)
+    rows = inventory_rows(runs, origin)
+    write_inventory_geojson(layout.inventory_geojson, rows, runs, origin, crs)
+    write_inventory_csv(layout.inventory_csv, rows)
+    meshes = {run.run_id: run_mesh(run, params.sweep) for run in runs if run.poles}
+    mesh_files = write_meshes(layout.meshes_dir, meshes)
+    status = [row["status"] for row in rows]
+    written = [layout.models_file, layout.superimposed_file, layout.inventory_geojson]
+    written += [layout.inventory_csv, *(layout.meshes_dir / f for f in mesh_files)]
+    return ReconstructionSummary(
+        runs=len(runs),
+        reconstructed=status.count("reconstructed"),
+        poles_only=status.count("poles only"),
+        not_reconstructed=status.count("not reconstructed"),
+        files=tuple(path.relative_to(folder).as_posix() for path in written),
+        seconds=seconds,
+    )
+
+
+def reconstruct_into(
+    run_dir: Path,
+    xyz: np.ndarray,
+    point_segment: np.ndarray,
+    label: np.ndarray,
+    trajectory: np.ndarray,
+    *,
+    origin: np.ndarray,
+    crs: str,
+    params: ReconstructionParams = ReconstructionParams(),
+    inputs: Iterable[str | os.PathLike] = (),
+    progress: bool = False,
+) -> ReconstructionSummary:
+    """Reconstruct a run's guardrails and (re)place ``run_dir/reconstruction`` whole.
+
+    The new reconstruction is written into a staging folder beside the old one and swapped in
+    only when complete (:func:`guardrail_core.formats.atomic.staged_folder`), so a failure leaves
+    the previous reconstruction as it was. ``inputs`` are the files the arrays came from (the
+    drive's parts, :func:`guardrail_core.formats.drive.drive_parts`); they and the run's own
+    tables must lie outside ``reconstruction/``, else
+    :class:`~guardrail_core.errors.InputInsideOutputError` is raised before any work.
+    """
+    from guardrail_core.formats.run_folder import POINT_ROAD
+
+    run_folder = RunFolder(run_dir)
+    sources = [*run_folder.parts(), *inputs]
+    target = run_folder.reconstruction.root
+    with staged_folder(target, overwrite=True, inputs=sources) as staging:
+        start = time.perf_counter()
+        reconstruction = reconstruct_guardrails(
+            xyz,
+            guardrail_mask(point_segment, label),
+            np.asarray(point_segment) == POINT_ROAD,
+            trajectory,
+            params=params,
+            progress=progress,
+        )
+        seconds = round(time.perf_counter() - start, 4)
+        summary = write_reconstruction(
+            staging, reconstruction, params=params, origin=origin, crs=crs, seconds=seconds
+        )
+    return summary

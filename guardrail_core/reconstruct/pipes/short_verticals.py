@@ -1,0 +1,93 @@
+"""Short vertical pipes between two pipes that run across them (an arch's king post, §4.3).
+
+In the x histogram of all points a 0.15 m vertical barely rises above the rails; once the
+straight pipes' points are out, it stands out in the histogram of the rest.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from guardrail_core.reconstruct.pipes.histogram import bin_of, regions_above
+from guardrail_core.reconstruct.pipes.params import PipeParams
+from guardrail_core.reconstruct.pipes.polylines import central_quantiles
+from guardrail_core.reconstruct.pipes.skeleton import Skeleton
+from guardrail_core.reconstruct.pipes.verticals import crossed, longest_chain
+
+
+def short_verticals(
+    pts: np.ndarray,
+    rest_idx: np.ndarray,
+    lines: list[Skeleton],
+    edges: np.ndarray,
+    p: PipeParams,
+) -> tuple[list[Skeleton], np.ndarray]:
+    """Short vertical pipes among the points ``rest_idx`` off the straight pipes ``lines``.
+
+    The histogram of those points (bins ``edges``, (B + 1,) metres) is summed over
+    ``short_window_m`` (the points are few) and its threshold is ``histogram_factor`` times its
+    median over the filled bins (the level of the curved pipes). A peak is a short vertical
+    when its points stand within ``short_drift_m`` of one x over at least
+    ``vertical_min_length_m`` and pipes run across both its ends. The foot of an arch, as steep,
+    fails that: at its top the arch goes on to one side only.
+
+    Parameters
+    ----------
+    pts : (N, 3) float64, unit coordinates, metres: the points between the poles
+    rest_idx : (M,) int64, indices into ``pts`` of the points left to search
+
+    Returns
+    -------
+    The vertical skeletons (``idx`` into ``pts``) and a mask (M,) over ``rest_idx`` of their
+    points.
+    """
+    mask = np.zeros(len(rest_idx), dtype=bool)
+    on_line = np.zeros(len(pts), dtype=bool)
+    for line in lines:
+        on_line[line.idx] = True
+    keep = ~on_line[rest_idx]
+    off = rest_idx[keep]
+    if len(off) < p.min_points:
+        return [], mask
+    n_bins = len(edges) - 1
+    width = max(1, int(round(p.short_window_m / p.histogram_bin_m)))
+    counts = np.convolve(
+        np.bincount(bin_of(pts[off, 0], edges, p), minlength=n_bins), np.ones(width), mode="same"
+    )
+    threshold = max(
+        p.histogram_factor * float(np.median(counts[counts > 0])), p.histogram_min_count
+    )
+    starts, stops = regions_above(counts, threshold)
+    x, y = pts[off, 0], pts[off, 1]
+    skels: list[Skeleton] = []
+    taken = np.zeros(len(off), dtype=bool)
+    for a, b in zip(starts, stops, strict=True):
+        centre = 0.5 * (edges[a] + edges[b])
+        half = max(0.5 * (edges[b] - edges[a]), p.short_window_m)
+        found = None
+        for _ in range(p.window_passes):  # the window follows the estimated pipe width
+            sel = (np.abs(x - centre) <= half) & ~taken
+            if sel.sum() < p.min_points:
+                break
+            y0, y1 = longest_chain(y[sel], p.vertical_gap_m)
+            inner = sel & (y > y0 + p.slice_interval_m) & (y < y1 - p.slice_interval_m)
+            if y1 - y0 < p.vertical_min_length_m or inner.sum() < p.min_points:
+                break
+            slope = np.polyfit(y[inner], x[inner], 1)[0]
+            qlo, qhi = central_quantiles(x[inner], p.radius_share)
+            centre, radius = 0.5 * (qlo + qhi), 0.5 * (qhi - qlo) / p.radius_share
+            half = radius + p.assign_margin_m
+            found = (y0, y1, radius, abs(slope) * (y1 - y0))
+        if found is None:
+            continue
+        y0, y1, radius, drift = found
+        if drift > p.short_drift_m or not all(
+            crossed(pts, centre, end, radius, p) for end in (y0, y1)
+        ):
+            continue
+        band = (np.abs(x - centre) <= half) & (y >= y0) & (y <= y1) & ~taken
+        taken |= band
+        xy = np.array([[centre, y0], [centre, y1]])
+        skels.append(Skeleton(xy=xy, kind="vertical", idx=off[band]))
+    mask[np.flatnonzero(keep)[taken]] = True
+    return skels, mask

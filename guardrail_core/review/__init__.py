@@ -1,0 +1,1 @@
+"""Learning from the operators' labels: training on a run's reviewed segments."""

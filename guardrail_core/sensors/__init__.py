@@ -1,0 +1,1 @@
+"""The vehicle's sensors: trajectory, cameras (pinhole + Brown-Conrady), scanner lattice."""
