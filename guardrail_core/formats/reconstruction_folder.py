@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -24,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from guardrail_core.errors import (
+    GuardrailError,
     InvalidOptionError,
     NoReconstructionError,
     ReconstructionFormatVersionError,
@@ -166,16 +168,14 @@ class ReconstructionFolder:
                 f"{self.root.parent}: no reconstruction (no {RECONSTRUCTION_DIR}/{MODELS_FILE}); "
                 "run `guardrail reconstruct RUN_DIR`"
             )
-        try:
-            data = json.loads(path.read_text(encoding="utf-8"))
-        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-            raise RunFolderError(f"{path}: not valid JSON ({exc})") from exc
-        version = data.get("format_version") if isinstance(data, dict) else None
-        if version != RECONSTRUCTION_FORMAT_VERSION:
-            raise ReconstructionFormatVersionError(
-                f"{path}: reconstruction format {version!r}, this version reads "
+        data = read_versioned_json(
+            path,
+            RECONSTRUCTION_FORMAT_VERSION,
+            lambda found: ReconstructionFormatVersionError(
+                f"{path}: reconstruction format {found!r}, this version reads "
                 f"{RECONSTRUCTION_FORMAT_VERSION}; run `guardrail reconstruct` again"
-            )
+            ),
+        )
         params, runs, seconds = data.get("params"), data.get("runs"), data.get("seconds")
         if not isinstance(params, dict) or not isinstance(runs, list):
             raise RunFolderError(f"{path}: expected a 'params' object and a 'runs' list")
@@ -202,3 +202,25 @@ class ReconstructionFolder:
             raise RunFolderError(
                 f"{self.superimposed_file}: no superimposed points of run {run_id} ({exc})"
             ) from exc
+
+
+def read_versioned_json(
+    path: Path, version: Any, mismatch: Callable[[Any], GuardrailError]
+) -> dict[str, Any]:
+    """The JSON object in ``path``, whose ``format_version`` must be ``version``.
+
+    Raises
+    ------
+    RunFolderError
+        The file is not valid JSON.
+    GuardrailError
+        ``mismatch(found_version)``: the version is another (or absent, or not an object).
+    """
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise RunFolderError(f"{path}: not valid JSON ({exc})") from exc
+    found = data.get("format_version") if isinstance(data, dict) else None
+    if found != version:
+        raise mismatch(found)
+    return data

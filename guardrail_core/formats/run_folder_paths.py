@@ -17,7 +17,11 @@ from typing import Any
 import numpy as np
 
 from guardrail_core.errors import NotARunFolderError, RunFolderError, RunFormatVersionError
-from guardrail_core.formats.reconstruction_folder import RECONSTRUCTION_DIR, ReconstructionFolder
+from guardrail_core.formats.reconstruction_folder import (
+    RECONSTRUCTION_DIR,
+    ReconstructionFolder,
+    read_versioned_json,
+)
 from guardrail_core.formats.run_folder import (
     CROPS_DIR,
     EMBEDDINGS_FILE,
@@ -129,17 +133,14 @@ class RunFolder:
                 f"{self.root}: not a run folder (no {RUN_FILE}); make one with "
                 "`guardrail process DRIVE --model MODEL --out RUN_DIR`"
             )
-        try:
-            data = json.loads(self.run_file.read_text(encoding="utf-8"))
-        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-            raise RunFolderError(f"{self.run_file}: not valid JSON ({exc})") from exc
-        version = data.get("format_version") if isinstance(data, dict) else None
-        if version != RUN_FORMAT_VERSION:
-            raise RunFormatVersionError(
-                f"{self.run_file}: run format version {version!r}, this version of the tool "
+        return read_versioned_json(
+            self.run_file,
+            RUN_FORMAT_VERSION,
+            lambda found: RunFormatVersionError(
+                f"{self.run_file}: run format version {found!r}, this version of the tool "
                 f"reads {RUN_FORMAT_VERSION}; process the drive again"
-            )
-        return data
+            ),
+        )
 
     def info(self) -> RunInfo:
         """``run.json``, typed and checked (see :meth:`open`; a missing member is a
