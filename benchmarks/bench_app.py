@@ -65,10 +65,10 @@ from app.session import ReviewSession  # noqa: E402
 from guardrail_core.errors import GuardrailError  # noqa: E402
 from guardrail_core.extract.classify import ClassifierParams  # noqa: E402
 from guardrail_core.extract.segment_head import SegmentHeadParams  # noqa: E402
-from guardrail_core.extract.track import track_coordinates  # noqa: E402
 from guardrail_core.extract.training import TrainingSet, train_on_set  # noqa: E402
 from guardrail_core.reconstruct.pipeline import ReconstructionParams  # noqa: E402
 from guardrail_core.review.training import train_from_run, training_set_from_run  # noqa: E402
+from guardrail_core.sensors.track import track_coordinates  # noqa: E402
 
 TARGET_RELABEL_S = 0.1
 TARGET_SCENE_S = 3.0

@@ -41,8 +41,8 @@ from guardrail_core.extract.lattice import build_lattice  # noqa: E402
 from guardrail_core.extract.pipeline import extract, slice_drive  # noqa: E402
 from guardrail_core.extract.road import remove_road  # noqa: E402
 from guardrail_core.extract.segments import SegmentParams, wireframe_components  # noqa: E402
-from guardrail_core.extract.track import track_coordinates  # noqa: E402
 from guardrail_core.formats.drive import load_drive  # noqa: E402
+from guardrail_core.sensors.track import track_coordinates  # noqa: E402
 from guardrail_core.timing import StageTimer  # noqa: E402
 
 TARGET_POINTS_PER_S = 1_000_000

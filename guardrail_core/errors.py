@@ -70,6 +70,11 @@ class EmptyDriveError(DriveError):
     """The drive holds no points to process (none at all, or none left after road removal)."""
 
 
+class TilesFailedError(GuardrailError):
+    """Every processing tile of a drive failed: there is no run to write (each tile's error is
+    in the message). A run where only some tiles failed is written, and reports them."""
+
+
 class ModelError(GuardrailError):
     """A classifier model folder cannot be read or used."""
 
@@ -131,6 +136,11 @@ class SourceFormatError(ImportSourceError):
 class MissingGpsTimeError(ImportSourceError):
     """A LAS/LAZ point cloud has no ``gps_time``, so its points cannot be placed on the
     trajectory or the scan lattice."""
+
+
+class PointsOutOfTimeOrderError(SourceFormatError):
+    """A LAS/LAZ file of a delivery does not list its points in GPS-time order, so it cannot be
+    streamed into a drive's time-ordered tiles."""
 
 
 class TrajectoryCoverageError(ImportSourceError):

@@ -31,12 +31,14 @@ ALLOWED: dict[str, set[str]] = {
     "importers": DATA,
     "extract": DATA,
     "reconstruct": DATA,
-    "process": DATA | {"extract", "reconstruct"},
+    "distributed": BASE,
+    "process": DATA | {"extract", "reconstruct", "distributed"},
     "evaluate": DATA | {"extract", "reconstruct"},
     "review": DATA | {"extract"},
     "export": DATA | {"reconstruct"},
     "cli": DATA
-    | {"synth", "importers", "extract", "reconstruct", "process", "evaluate", "review", "export"},
+    | {"synth", "importers", "extract", "reconstruct", "process", "evaluate", "review", "export"}
+    | {"distributed"},
 }
 #: third-party packages only the review app may use
 APP_ONLY = {"app", "fastapi", "viser", "uvicorn", "starlette"}

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from guardrail_core.cli import main
+from tests.drive_files import tile_file
 from tests.file_tree import file_tree
 
 
@@ -75,11 +76,11 @@ def test_process_refuses_nan_coordinates(
 ) -> None:
     copy = tmp_path / "drive"
     shutil.copytree(drive_path, copy)
-    las = laspy.read(str(copy / "points.laz"))
+    las = laspy.read(str(tile_file(copy)))
     times = np.array(las.gps_time)
     times[5] = np.nan
     las.gps_time = times
-    las.write(str(copy / "points.laz"))
+    las.write(str(tile_file(copy)))
     run = tmp_path / "run"
     code = main(["process", str(copy), "--model", str(model_path), "--out", str(run), "--quiet"])
     assert code == 2

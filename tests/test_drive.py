@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import shutil
 from pathlib import Path
 
@@ -18,6 +19,7 @@ from guardrail_core.errors import (
     TimestampMismatchError,
 )
 from guardrail_core.formats.drive import Drive, load_drive
+from tests.drive_files import drive_las, tile_file, truth_file
 
 
 @pytest.fixture
@@ -51,7 +53,7 @@ def test_loaded_drive_holds_every_part(drive: Drive) -> None:
 
 
 def test_points_keep_sub_millimetre_precision_in_map_coordinates(drive: Drive) -> None:
-    las = laspy.read(str(drive.root / "points.laz"))
+    las = drive_las(drive.root)
     assert las.header.version.minor == 4
     assert {"gps_time", "rotation", "phase"} <= set(las.point_format.dimension_names)
     world = np.stack([las.x, las.y, las.z], axis=1)
@@ -65,11 +67,18 @@ def test_missing_drive_folder(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize(
-    "name", ["drive.json", "points.laz", "trajectory.csv", "cameras.json", "images.json"]
+    "name", ["drive.json", "points/index.json", "trajectory.csv", "cameras.json", "images.json"]
 )
 def test_missing_file_is_named(copy: Path, name: str) -> None:
     (copy / name).unlink()
-    with pytest.raises(MissingDriveFileError, match=name.replace(".", r"\.")):
+    with pytest.raises(MissingDriveFileError, match=re.escape(Path(name).name)):
+        load_drive(copy)
+
+
+def test_missing_point_tile_is_named(copy: Path) -> None:
+    tile = tile_file(copy)
+    tile.unlink()
+    with pytest.raises(MissingDriveFileError, match=re.escape(tile.name)):
         load_drive(copy)
 
 
@@ -80,8 +89,8 @@ def test_missing_image_file_is_named(copy: Path) -> None:
 
 
 def test_newer_major_format_version_is_refused(copy: Path) -> None:
-    _edit_json(copy / "drive.json", lambda d: d.update(format_version="2.0"))
-    with pytest.raises(DriveFormatError, match="format_version 2.0"):
+    _edit_json(copy / "drive.json", lambda d: d.update(format_version="3.0"))
+    with pytest.raises(DriveFormatError, match="format_version 3.0"):
         load_drive(copy)
 
 
@@ -116,6 +125,10 @@ def test_trajectory_that_does_not_cover_the_points(copy: Path) -> None:
     path = copy / "trajectory.csv"
     lines = path.read_text().splitlines()
     path.write_text("\n".join(lines[: len(lines) // 2]))
+    end = float(lines[len(lines) // 2 - 1].split(",")[0])
+    # The images stay inside it, so what is refused is the points.
+    images = json.loads((copy / "images.json").read_text())
+    (copy / "images.json").write_text(json.dumps([r for r in images if r["gps_time"] <= end]))
     with pytest.raises(TimestampMismatchError, match="trajectory covers only"):
         load_drive(copy)
 
@@ -151,27 +164,27 @@ def test_non_finite_camera_pose(copy: Path) -> None:
 
 
 def test_las_without_gps_time(copy: Path) -> None:
-    las = laspy.read(str(copy / "points.laz"))
+    las = laspy.read(str(tile_file(copy)))
     plain = laspy.LasData(laspy.LasHeader(point_format=2, version="1.2"))
     plain.header.offsets, plain.header.scales = las.header.offsets, las.header.scales
     plain.x, plain.y, plain.z = las.x, las.y, las.z
-    plain.write(str(copy / "points.laz"))
+    plain.write(str(tile_file(copy)))
     with pytest.raises(DriveDimensionError, match="no gps_time"):
         load_drive(copy)
 
 
 def test_non_finite_gps_time(copy: Path) -> None:
-    las = laspy.read(str(copy / "points.laz"))
+    las = laspy.read(str(tile_file(copy)))
     times = np.array(las.gps_time)
     times[10] = np.nan
     las.gps_time = times
-    las.write(str(copy / "points.laz"))
+    las.write(str(tile_file(copy)))
     with pytest.raises(NonFiniteCoordinatesError, match="gps_time"):
         load_drive(copy)
 
 
 def test_not_a_las_file(copy: Path) -> None:
-    (copy / "points.laz").write_bytes(b"this is no point cloud")
+    tile_file(copy).write_bytes(b"this is no point cloud")
     with pytest.raises(DriveFormatError, match="not a readable LAS"):
         load_drive(copy)
 
@@ -179,20 +192,20 @@ def test_not_a_las_file(copy: Path) -> None:
 def test_lattice_is_recovered_when_the_extra_dimensions_are_absent(
     copy: Path, drive: Drive
 ) -> None:
-    las = laspy.read(str(copy / "points.laz"))
+    las = laspy.read(str(tile_file(copy)))
     plain = laspy.LasData(laspy.LasHeader(point_format=6, version="1.4"))
     plain.header.offsets, plain.header.scales = las.header.offsets, las.header.scales
     plain.x, plain.y, plain.z, plain.gps_time = las.x, las.y, las.z, las.gps_time
-    plain.write(str(copy / "points.laz"))
+    plain.write(str(tile_file(copy)))
     again = load_drive(copy, with_truth=False)
     np.testing.assert_array_equal(again.points.rotation, drive.points.rotation)
     np.testing.assert_array_equal(again.points.phase, drive.points.phase)
 
 
 def test_truth_of_the_wrong_length(copy: Path) -> None:
-    with np.load(copy / "truth" / "points.npz") as npz:
+    with np.load(truth_file(copy)) as npz:
         cls, obj = npz["class"][:-1], npz["object_id"][:-1]
-    np.savez(copy / "truth" / "points.npz", **{"class": cls, "object_id": obj})
+    np.savez(truth_file(copy), **{"class": cls, "object_id": obj})
     with pytest.raises(DriveDimensionError, match="truth has"):
         load_drive(copy)
     assert load_drive(copy, with_truth=False).truth is None

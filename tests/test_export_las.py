@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 from pathlib import Path
@@ -12,6 +13,8 @@ import pytest
 
 from guardrail_core.cli import main
 from guardrail_core.errors import (
+    DriveDimensionError,
+    DriveFormatError,
     ExportError,
     InputInsideOutputError,
     MissingDriveFileError,
@@ -30,10 +33,12 @@ from guardrail_core.export.las import (
     pole_points,
 )
 from guardrail_core.formats.drive import Drive
+from guardrail_core.formats.drive_tiles import read_tile_index
 from guardrail_core.formats.reconstruction_folder import RECONSTRUCTION_DIR
 from guardrail_core.formats.run_folder import load_run
 from guardrail_core.reconstruct.model import Pole
 from guardrail_core.reconstruct.run_models import load_run_models
+from tests.drive_files import drive_las, tile_file, write_drive_copy
 from tests.file_tree import file_tree
 
 
@@ -46,23 +51,19 @@ def exported(
     return summary, laspy.read(str(out))
 
 
-def _drive_points(drive_path: Path) -> laspy.LasData:
-    meta = json.loads((drive_path / "drive.json").read_text())
-    return laspy.read(str(drive_path / meta["files"]["points"]))
-
-
 def _drive_copy(
     drive_path: Path, folder: Path, *, crs: str | None = None, las: laspy.LasData | None = None
 ) -> Path:
-    """drive.json and the point file of the test drive (all the export reads), with changes."""
+    """drive.json and the point tiles of the test drive (all the export reads), with changes;
+    with ``las``, a format 1.1 drive of that one point file."""
     folder.mkdir()
     meta = json.loads((drive_path / "drive.json").read_text())
     if crs is not None:
         meta["crs"] = crs
     if las is None:
-        name = meta["files"]["points"]
-        shutil.copy(drive_path / name, folder / name)
+        shutil.copytree(drive_path / "points", folder / "points")
     else:
+        meta["format_version"] = "1.1"
         meta["files"]["points"] = "points.las"  # uncompressed: quicker to write
         las.write(str(folder / "points.las"))
     (folder / "drive.json").write_text(json.dumps(meta))
@@ -91,7 +92,7 @@ def test_every_point_of_the_drive_in_map_coordinates(
     np.testing.assert_allclose(las.header.scales, 1e-4)
     local = np.column_stack([las.x, las.y, las.z]) - drive.origin
     assert np.abs(local - drive.points.xyz).max() <= 1e-4
-    source = _drive_points(drive_path)
+    source = drive_las(drive_path)
     np.testing.assert_array_equal(las.X, source.X)  # the very integers of the drive's file
     np.testing.assert_array_equal(las.gps_time, drive.points.gps_time)
     np.testing.assert_array_equal(las.intensity, drive.points.intensity)
@@ -118,7 +119,7 @@ def test_guardrail_pole_and_road_classes(
     assert int(poles.sum()) == summary.pole_points > 0
     assert summary.pole_points < summary.guardrail_points
 
-    original = np.asarray(_drive_points(drive_path).classification)
+    original = np.asarray(drive_las(drive_path).classification)
     road = (run.point_segment == -1) & np.isin(original, [0, 1])
     assert road.any()
     assert np.all(classification[road] == CLASS_ROAD_SURFACE)
@@ -228,12 +229,62 @@ def test_a_crs_pyproj_cannot_read_writes_no_crs_and_warns(
         assert reader.header.point_count == summary.points
 
 
+@pytest.fixture(scope="module")
+def tiled_drive(drive: Drive, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The test drive written anew in 5 m tiles."""
+    return write_drive_copy(drive, tmp_path_factory.mktemp("tiled") / "drive", tile_m=5.0)
+
+
+def test_a_drive_of_many_tiles_exports_the_very_same_points(
+    exported: tuple[ExportSummary, laspy.LasData],
+    run_path: Path,
+    tiled_drive: Path,
+    tmp_path: Path,
+) -> None:
+    summary, las = exported
+    assert len(read_tile_index(tiled_drive)) >= 5
+    again = export_run_las(run_path, tmp_path / "result.laz", drive_dir=tiled_drive)
+    assert dataclasses.replace(again, out=summary.out) == summary
+    tiled = laspy.read(str(again.out))
+    assert tiled.point_format == las.point_format
+    for name in las.point_format.dimension_names:
+        np.testing.assert_array_equal(tiled[name], las[name], err_msg=name)
+    assert tiled.header.point_count == las.header.point_count
+    np.testing.assert_array_equal(tiled.header.mins, las.header.mins)
+    np.testing.assert_array_equal(tiled.header.maxs, las.header.maxs)
+    assert tiled.header.parse_crs().to_epsg() == 6677
+
+
+def test_a_bad_tile_is_named_and_nothing_is_written(
+    run_path: Path, tiled_drive: Path, tmp_path: Path
+) -> None:
+    drive = tmp_path / "drive"
+    shutil.copytree(tiled_drive, drive, ignore=shutil.ignore_patterns("images", "truth"))
+    out = tmp_path / "out" / "result.laz"
+    coloured = laspy.convert(laspy.read(str(tile_file(drive, 1))), point_format_id=7)
+    coloured.write(str(tile_file(drive, 1)))
+    with pytest.raises(DriveFormatError, match=r"000001\.laz: point format 7 .* differs"):
+        export_run_las(run_path, out, drive_dir=drive)
+    shutil.copy(tile_file(tiled_drive, 1), tile_file(drive, 1))
+    index_file = drive / "points" / "index.json"
+    index = json.loads(index_file.read_text())
+    index["tiles"][1]["points"] += 1  # the drive's total stays the run's
+    index["tiles"][2]["points"] -= 1
+    index_file.write_text(json.dumps(index))
+    with pytest.raises(DriveDimensionError, match=r"000001\.laz: holds .* the tile index says"):
+        export_run_las(run_path, out, drive_dir=drive)
+    tile_file(drive, 3).unlink()
+    with pytest.raises(MissingDriveFileError, match=r"000003\.laz"):
+        export_run_las(run_path, out, drive_dir=drive)
+    assert not out.parent.exists() or not list(out.parent.iterdir())
+
+
 def test_a_legacy_drive_file_keeps_colours_and_scan_angles(
     run_path: Path, drive_path: Path, tmp_path: Path
 ) -> None:
     import pyproj
 
-    source = laspy.convert(_drive_points(drive_path), point_format_id=3, file_version="1.2")
+    source = laspy.convert(drive_las(drive_path), point_format_id=3, file_version="1.2")
     n = len(source.points)
     rng = np.random.default_rng(0)
     colour = rng.integers(0, 65535, (3, n), dtype=np.uint16)
@@ -281,7 +332,7 @@ def test_a_run_without_reconstruction_has_no_pole_points_and_warns(
 def test_a_drive_with_other_points_is_refused_and_nothing_is_written(
     run_path: Path, drive_path: Path, tmp_path: Path
 ) -> None:
-    source = _drive_points(drive_path)
+    source = drive_las(drive_path)
     fewer = laspy.LasData(source.header, source.points[:-10])
     drive = _drive_copy(drive_path, tmp_path / "fewer", las=fewer)
     out = tmp_path / "out"
@@ -314,13 +365,13 @@ def test_an_output_that_is_an_input_is_refused_and_the_inputs_survive(
     run_path: Path, drive_path: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     drive = _drive_copy(drive_path, tmp_path / "drive")
-    points = drive / json.loads((drive / "drive.json").read_text())["files"]["points"]
+    points = tile_file(drive)
     run = tmp_path / "run"
     shutil.copytree(run_path, run)
     (run / "crops" / "old.laz").write_bytes(b"not the run's, but in its crops folder")
     (tmp_path / "alias").symlink_to(drive)
     before = file_tree(tmp_path)
-    for out in (points, tmp_path / "alias" / points.name):
+    for out in (points, tmp_path / "alias" / points.relative_to(drive)):
         with pytest.raises(InputInsideOutputError, match="is the input"):
             export_run_las(run, out, drive_dir=drive, overwrite=True)
     with pytest.raises(InputInsideOutputError, match="inside the input folder"):
@@ -337,11 +388,11 @@ def test_a_failed_write_leaves_nothing_and_keeps_the_old_file(
     out = tmp_path / "result.laz"
     out.write_bytes(b"the previous export")
 
-    def fail(self: laspy.LasData, destination: object, **kwargs: object) -> None:
-        destination.write(b"LASF half a file")  # type: ignore[attr-defined]
+    def fail(self: laspy.LasWriter, points: object) -> None:
+        self.dest.write(b"half a tile")
         raise OSError("disk full")
 
-    monkeypatch.setattr(laspy.LasData, "write", fail)
+    monkeypatch.setattr(laspy.LasWriter, "write_points", fail)
     with pytest.raises(OSError, match="disk full"):
         export_run_las(run_path, out, drive_dir=drive_path, overwrite=True)
     assert out.read_bytes() == b"the previous export"
@@ -385,7 +436,7 @@ def test_export_command_prints_the_crs_warning(
 def test_export_command_with_another_drive_fails_with_a_message(
     run_path: Path, drive_path: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    source = _drive_points(drive_path)
+    source = drive_las(drive_path)
     drive = _drive_copy(
         drive_path, tmp_path / "drive", las=laspy.LasData(source.header, source.points[:100])
     )

@@ -19,11 +19,11 @@ from guardrail_core.evaluate.detection import evaluate_run
 from guardrail_core.extract.crops import CROP_NO_IMAGE, CROP_OK
 from guardrail_core.extract.model_folder import load_model
 from guardrail_core.extract.segment_truth import segment_truth
-from guardrail_core.formats.drive import Drive, load_drive
+from guardrail_core.formats.drive import Drive, PointCloud, load_drive
 from guardrail_core.formats.run_folder import POINT_OFF_ROAD, POINT_ROAD, load_run
-from guardrail_core.io.las import write_points
 from guardrail_core.process import process_drive
 from guardrail_core.reconstruct.run_models import load_run_models
+from tests.drive_files import write_drive_copy
 from tests.file_tree import file_tree
 
 
@@ -210,21 +210,18 @@ def test_a_drive_without_images_is_processed_and_reported(
 def test_an_empty_drive_is_a_named_error(
     drive_path: Path, model_path: Path, tmp_path: Path
 ) -> None:
-    copy = tmp_path / "drive"
-    shutil.copytree(drive_path, copy)
-    drive = load_drive(copy)
+    drive = load_drive(drive_path)
+    assert drive.truth is not None
     empty = np.zeros(0)
-    write_points(
-        copy / "points.laz",
-        np.zeros((0, 3)),
-        np.asarray(drive.origin),
-        empty,
-        empty.astype(np.uint16),
-        empty.astype(np.int64),
-        empty.astype(np.int64),
-    )
-    np.savez_compressed(
-        copy / "truth" / "points.npz", **{"class": np.zeros(0, np.uint8)}, object_id=np.zeros(0)
+    copy = write_drive_copy(
+        drive,
+        tmp_path / "drive",
+        points=PointCloud(
+            np.zeros((0, 3)), empty, empty.astype(np.uint16), *[empty.astype(int)] * 2
+        ),
+        truth=dataclasses.replace(
+            drive.truth, point_class=np.zeros(0, np.uint8), point_object=np.zeros(0, np.int32)
+        ),
     )
     with pytest.raises(EmptyDriveError, match="no points"):
         process_drive(load_drive(copy), load_model(model_path), tmp_path / "run")

@@ -16,7 +16,7 @@ import pytest
 from guardrail_core.errors import GuardrailError
 from guardrail_core.extract.lattice import build_lattice
 from guardrail_core.extract.road import OFF_ROAD, ROAD, RoadParams, remove_road
-from guardrail_core.extract.track import TrackCoordinates
+from guardrail_core.sensors.track import TrackCoordinates
 
 KEPT = 0
 LINE_SPACING_M = 0.05  # between scan lines

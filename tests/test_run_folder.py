@@ -101,7 +101,7 @@ def test_the_paths_of_a_run_folder(run_path: Path) -> None:
     assert folder.crop_path(7) == run_path / "crops" / "000007.jpg"
     assert folder.run_file == run_path / "run.json"
     assert {p.name for p in folder.parts()} == {
-        "run.json", "points.npz", "segments.npz", "segments.csv", "timings.json",
+        "run.json", "points", "segments.npz", "segments.csv", "timings.json",
         "embeddings.npy", "crops",
     }  # fmt: skip
     rec = folder.reconstruction

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from guardrail_core.errors import GuardrailError
-from guardrail_core.extract.track import TrackCoordinates, track_coordinates
+from guardrail_core.sensors.track import TrackCoordinates, track_coordinates
 from guardrail_core.sensors.trajectory import Trajectory
 
 SPEED = 10.0  # m/s

@@ -29,10 +29,10 @@ from app.scene.window import window_points
 from app.segment_views import review_queue
 from app.session import ReviewSession
 from guardrail_core.errors import GuardrailError, RunFolderError
-from guardrail_core.extract.track import track_coordinates
 from guardrail_core.io.meshes import run_file_stem
 from guardrail_core.reconstruct.assemble import run_mesh
 from guardrail_core.reconstruct.pipeline import ReconstructionParams
+from guardrail_core.sensors.track import track_coordinates
 
 #: Mesh colours: the reconstruction, a retuned run, and the ghost of its previous mesh.
 MESH_COLOUR = (230, 230, 235)

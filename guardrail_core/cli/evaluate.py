@@ -37,14 +37,15 @@ def add_parser(subparsers: common.Subparsers) -> None:
 def run(args: argparse.Namespace) -> int:
     import json
 
-    from guardrail_core.evaluate.detection import evaluate_run, format_report
+    from guardrail_core.evaluate.detection import evaluate_run_folder, format_report
     from guardrail_core.formats.drive import load_drive
     from guardrail_core.formats.run_folder import load_run
 
-    drive, run_folder = load_drive(args.drive), load_run(args.run)
-    result = evaluate_run(drive, run_folder)
+    # Tile by tile: a survey's drive never whole in memory.
+    result = evaluate_run_folder(args.drive, args.run)
     sweep = None
     if args.units_sweep:
+        drive, run_folder = load_drive(args.drive), load_run(args.run)
         from guardrail_core.evaluate.units_sweep import (
             format_units_sweep,
             parse_units,

@@ -10,7 +10,11 @@ from guardrail_core.cli import common
 
 
 def add_parser(subparsers: common.Subparsers) -> None:
-    from guardrail_core.importers.las_delivery import DEFAULT_REFERENCE_HEIGHT_M
+    from guardrail_core.importers.las_delivery import (
+        DEFAULT_CHUNK_POINTS,
+        DEFAULT_REFERENCE_HEIGHT_M,
+        DEFAULT_TILE_M,
+    )
 
     own = common.options_parser()
     own.add_argument("points", type=Path, nargs="+", metavar="POINTS", help="LAS/LAZ file(s)")
@@ -65,6 +69,21 @@ def add_parser(subparsers: common.Subparsers) -> None:
         help="map CRS, e.g. EPSG:6677 (default: the one the LAS file declares, else 'unknown'); "
         "replaces the file's",
     )
+    own.add_argument(
+        "--tile-m",
+        type=float,
+        default=DEFAULT_TILE_M,
+        metavar="METRES",
+        help=f"metres of driving per tile of the drive's points (default {DEFAULT_TILE_M:g})",
+    )
+    own.add_argument(
+        "--chunk-points",
+        type=int,
+        default=DEFAULT_CHUNK_POINTS,
+        metavar="N",
+        help="points read from a LAS/LAZ file at a time; memory grows with it "
+        f"(default {DEFAULT_CHUNK_POINTS:,})",
+    )
     parser = subparsers.add_parser(
         "las",
         help="a LAS/LAZ delivery: points with GPS time, trajectory, images and calibration",
@@ -72,15 +91,14 @@ def add_parser(subparsers: common.Subparsers) -> None:
         "point format with gps_time, map coordinates), a trajectory CSV (time, x, y, z, roll, "
         "pitch, yaw), optionally an image list CSV (file, camera, gps_time) with the cameras' "
         "calibration (OpenCV YAML or JSON), and the scanner's rates for the scan lattice. "
-        "Formats: docs/import.md.",
+        "The points stream in GPS-time order, chunk by chunk, into tiles of --tile-m metres: "
+        "memory does not grow with the delivery. Formats: docs/import.md.",
         parents=[own, common.las_options(), common.overwrite_options(), common.quiet_options()],
     )
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from guardrail_core.formats.drive import load_drive
-    from guardrail_core.formats.drive_summary import describe_drive
     from guardrail_core.importers.las_delivery import import_las_delivery, read_scanner_file
 
     # Options override the scanner file's values, one by one.
@@ -103,6 +121,8 @@ def run(args: argparse.Namespace) -> int:
         crs=args.crs,
         reference_height_m=args.reference_height,
         trajectory_degrees=args.trajectory_degrees,
+        tile_m=args.tile_m,
+        chunk_points=args.chunk_points,
         compress=not args.las,
         overwrite=args.overwrite,
         progress=not args.quiet,
@@ -110,9 +130,10 @@ def run(args: argparse.Namespace) -> int:
     for note in result.notes:
         print(f"note: {note}", file=sys.stderr)
     crs_from = "none declared" if result.crs_from == "none" else f"from the {result.crs_from}"
+    # The drive is not loaded to describe it: a survey's points do not fit in memory.
     print(
-        f"imported {result.n_points:,} points and {result.n_images} images into {result.out} "
-        f"(CRS {result.crs}, {crs_from}; scanner t0 {result.scanner.t0_s:.6f} s)"
+        f"imported {result.n_points:,} points in {result.n_tiles} tiles and {result.n_images} "
+        f"images into {result.out} (CRS {result.crs}, {crs_from}; scanner t0 "
+        f"{result.scanner.t0_s:.6f} s)"
     )
-    print(describe_drive(load_drive(result.out)))
     return 0

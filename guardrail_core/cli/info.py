@@ -19,8 +19,11 @@ def add_parser(subparsers: common.Subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from guardrail_core.formats.drive import load_drive
+    from guardrail_core.formats.drive import open_drive
     from guardrail_core.formats.drive_summary import describe_drive
 
-    print(describe_drive(load_drive(args.drive)))
+    source = open_drive(args.drive)
+    # Every tile is read: info validates the whole drive.
+    points, truth = source.read_tiles(range(len(source.tiles)))
+    print(describe_drive(source.drive(points, truth), source.tiles))
     return 0

@@ -19,6 +19,41 @@ def add_parser(subparsers: common.Subparsers) -> None:
         "on simulated drives of a profile and a multi-beam scanner)",
     )
     own.add_argument("--out", type=Path, required=True, help="run folder to write")
+    tiles = own.add_argument_group("tiles and workers")
+    tiles.add_argument(
+        "--tile-m",
+        type=float,
+        default=100.0,
+        metavar="METRES",
+        help="metres of trajectory per processing tile, a multiple of 0.5 (default 100; 0: the "
+        "whole drive as one tile)",
+    )
+    tiles.add_argument(
+        "--margin-m",
+        type=float,
+        default=None,
+        metavar="METRES",
+        help="metres of its neighbours each tile sees on either side (default 20)",
+    )
+    tiles.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        help="worker processes of the embedded Dask LocalCluster (default: one per core; 0: "
+        "no Dask, tiles one after another in this process)",
+    )
+    tiles.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="run the tiles on an existing Dask cluster (tcp://HOST:PORT) instead; the drive, "
+        "model and output folders must be on storage every worker sees, at the same paths",
+    )
+    tiles.add_argument(
+        "--memory-limit",
+        default="auto",
+        help="memory per LocalCluster worker, Dask's syntax (e.g. 3GiB; default auto: the "
+        "machine's memory shared equally)",
+    )
     parser = subparsers.add_parser(
         "process",
         help="extract guardrail segments from a drive",
@@ -34,22 +69,25 @@ def add_parser(subparsers: common.Subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from guardrail_core.distributed import ClusterSpec, default_workers
     from guardrail_core.extract.model_folder import DEFAULT_MODEL_DIR, load_model
-    from guardrail_core.formats.drive import load_drive
-    from guardrail_core.process import process_drive
+    from guardrail_core.process import DEFAULT_MARGIN_M, process_drive_folder
 
     model_dir = args.model or DEFAULT_MODEL_DIR
     model = load_model(model_dir)
     if args.model is None:
         print(f"model: the default model shipped with guardrail ({model.version})")
-    drive = load_drive(args.drive, with_truth=False)
-    info = process_drive(
-        drive,
-        model,
+    workers = default_workers() if args.workers is None else args.workers
+    cluster = ClusterSpec(workers=workers, scheduler=args.scheduler, memory_limit=args.memory_limit)
+    info = process_drive_folder(
+        args.drive,
+        model_dir,
         args.out,
         overwrite=args.overwrite,
-        inputs=[model_dir],  # the drive's parts are inputs too (process_drive adds them)
         progress=not args.quiet,
+        tile_m=args.tile_m or None,
+        margin_m=DEFAULT_MARGIN_M if args.margin_m is None else args.margin_m,
+        cluster=cluster,
     )
     counts = info.counts
     crops = counts.crops
@@ -77,5 +115,17 @@ def run(args: argparse.Namespace) -> int:
     )
     if info.reconstruction is not None:
         print(common.reconstruction_summary(info.reconstruction))
+    processing = info.processing
+    if processing is not None:
+        print(
+            f"{len(processing.tiles)} tile(s) on {processing.scheduler} "
+            f"({processing.workers} worker(s)) in {processing.seconds:.1f} s"
+        )
+        for tile in processing.failed:
+            print(
+                f"error: tile {tile.number} (stations {tile.station_m[0]:g}..{tile.station_m[1]:g}"
+                f" m) failed, its points are marked unprocessed: {tile.error}",
+                file=sys.stderr,
+            )
     print(f"wrote {args.out}")
-    return 0
+    return 1 if processing is not None and processing.failed else 0

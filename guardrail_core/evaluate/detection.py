@@ -3,11 +3,13 @@ precision, F-measure per class), before and after label correction."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from guardrail_core.classes import GUARDRAIL_CLASSES
 from guardrail_core.errors import MissingDriveFileError, RunFolderError
-from guardrail_core.evaluate.reconstruction import evaluate_reconstruction, units_in_view
+from guardrail_core.evaluate.reconstruction import evaluate_reconstruction, PolePointCounter
 from guardrail_core.evaluate.results import (
     ClassCounts,
     ClassMetrics,
@@ -16,9 +18,9 @@ from guardrail_core.evaluate.results import (
     PointMetrics,
     ReconstructionEvaluation,
 )
-from guardrail_core.extract.segment_truth import segment_truth
-from guardrail_core.formats.drive import Drive
+from guardrail_core.formats.drive import Drive, open_drive
 from guardrail_core.formats.run_folder import CROP_STATUS_NAMES, Run
+from guardrail_core.formats.run_folder_paths import RunFolder
 from guardrail_core.reconstruct.run_models import load_run_models
 
 
@@ -45,7 +47,8 @@ def _class_metrics(truth: np.ndarray, predicted: np.ndarray) -> ClassMetrics:
 
 
 def evaluate_run(drive: Drive, run: Run) -> EvaluationResult:
-    """Compare a run's segment labels with the drive's truth.
+    """Compare a run's segment labels with the drive's truth (a drive held in memory; see
+    :func:`evaluate_run_folder` for one read tile by tile).
 
     Returns
     -------
@@ -71,41 +74,113 @@ def evaluate_run(drive: Drive, run: Run) -> EvaluationResult:
             f"{run.root}: made from a drive of {len(run.point_segment)} points, but "
             f"{drive.root} has {len(drive.points)}"
         )
-    n = len(run)
-    truth = segment_truth(drive.truth.point_class, run.point_segment, n)
-    raw, label = run.segments["raw_label"], run.segments["label"]
-    status = run.segments["crop_status"]
-
-    point_guardrail = np.isin(drive.truth.point_class, list(GUARDRAIL_CLASSES))
-    in_segment = run.point_segment >= 0
-    point_label = np.zeros(len(point_guardrail), bool)
-    point_label[in_segment] = label[run.point_segment[in_segment]]
-    tp = int((point_guardrail & point_label).sum())
-    reconstruction = None
-    if run.folder.reconstruction.exists():
-        runs = load_run_models(run.folder).runs
-        objects = drive.truth.objects
-        in_view = units_in_view(drive.points.xyz, drive.truth.point_object, objects)
-        reconstruction = evaluate_reconstruction(list(runs), objects, in_view=in_view)
-    return EvaluationResult(
-        segments=ClassCounts(guardrail=int(truth.sum()), other=int((~truth).sum())),
-        n_segments=n,
-        crops={
-            name: ClassCounts(
-                guardrail=int((truth & (status == code)).sum()),
-                other=int((~truth & (status == code)).sum()),
-            )
-            for code, name in CROP_STATUS_NAMES.items()
-        },
-        detection=detection_metrics(truth, label),
-        detection_raw=detection_metrics(truth, raw),
-        points=PointMetrics(
-            recall=tp / max(int(point_guardrail.sum()), 1),
-            precision=tp / max(int(point_label.sum()), 1),
-            n_true=int(point_guardrail.sum()),
-        ),
-        reconstruction=reconstruction,
+    tally = _Tally(run.segments, drive.truth.objects)
+    tally.add(
+        drive.truth.point_class, drive.truth.point_object, drive.points.xyz, run.point_segment
     )
+    return tally.result(run.folder)
+
+
+def evaluate_run_folder(drive_root: str | Path, run_root: str | Path) -> EvaluationResult:
+    """:func:`evaluate_run` reading the drive and the run tile by tile, so memory stays flat at
+    any drive length.
+
+    Raises
+    ------
+    MissingDriveFileError, RunFolderError
+        As :func:`evaluate_run`; also a drive with other tiles than the run was made from.
+    """
+    source = open_drive(drive_root)
+    folder = RunFolder.open(run_root)
+    if not source.has_truth:
+        raise MissingDriveFileError(
+            f"{source.root}: no truth/ folder, so there is nothing to evaluate against"
+        )
+    info = folder.info()
+    if info.drive.points != source.tiles.points or info.drive.tiles != len(source.tiles):
+        raise RunFolderError(
+            f"{folder.root}: made from a drive of {info.drive.points} points in "
+            f"{info.drive.tiles} tiles, but {source.root} has {source.tiles.points} in "
+            f"{len(source.tiles)}"
+        )
+    tally = _Tally(folder.segments(), source.objects)
+    for t in range(len(source.tiles)):
+        points, truth = source.read_tiles([t])
+        assert truth is not None  # has_truth
+        segment = folder.point_segment_tile(t)
+        if len(segment) != len(points):
+            raise RunFolderError(
+                f"{folder.point_tile_path(t)}: {len(segment)} points, the drive's tile has "
+                f"{len(points)}"
+            )
+        tally.add(truth.point_class, truth.point_object, points.xyz, segment)
+    return tally.result(folder)
+
+
+class _Tally:
+    """Counts of a run against the truth, added up tile by tile."""
+
+    def __init__(self, segments: dict[str, np.ndarray], objects: list[dict]) -> None:
+        self.segments = segments
+        self.objects = objects
+        n = len(segments["n_points"])
+        self.guardrail_in_segment = np.zeros(n, np.int64)
+        self.points_in_segment = np.zeros(n, np.int64)
+        self.true_points = self.predicted_points = self.true_positive = 0
+        self.pole_points = PolePointCounter(objects)
+
+    def add(
+        self,
+        point_class: np.ndarray,
+        point_object: np.ndarray,
+        xyz: np.ndarray,
+        point_segment: np.ndarray,
+    ) -> None:
+        """Add (n,) classes, object ids, (n, 3) points and segments of a piece of the drive."""
+        n = len(self.points_in_segment)
+        point_guardrail = np.isin(point_class, list(GUARDRAIL_CLASSES))
+        in_segment = point_segment >= 0
+        segment = point_segment[in_segment]
+        self.guardrail_in_segment += np.bincount(
+            segment, weights=point_guardrail[in_segment], minlength=n
+        ).astype(np.int64)
+        self.points_in_segment += np.bincount(segment, minlength=n)
+        point_label = np.zeros(len(point_guardrail), bool)
+        point_label[in_segment] = self.segments["label"][segment]
+        self.true_positive += int((point_guardrail & point_label).sum())
+        self.true_points += int(point_guardrail.sum())
+        self.predicted_points += int(point_label.sum())
+        self.pole_points.add(xyz, point_object)
+
+    def result(self, folder: RunFolder) -> EvaluationResult:
+        # Table 1's true class: guardrail where most of a segment's points are.
+        truth = 2 * self.guardrail_in_segment > self.points_in_segment
+        raw, label = self.segments["raw_label"], self.segments["label"]
+        status = self.segments["crop_status"]
+        reconstruction = None
+        if folder.reconstruction.exists():
+            runs = load_run_models(folder).runs
+            in_view = self.pole_points.units_in_view()
+            reconstruction = evaluate_reconstruction(list(runs), self.objects, in_view=in_view)
+        return EvaluationResult(
+            segments=ClassCounts(guardrail=int(truth.sum()), other=int((~truth).sum())),
+            n_segments=len(truth),
+            crops={
+                name: ClassCounts(
+                    guardrail=int((truth & (status == code)).sum()),
+                    other=int((~truth & (status == code)).sum()),
+                )
+                for code, name in CROP_STATUS_NAMES.items()
+            },
+            detection=detection_metrics(truth, label),
+            detection_raw=detection_metrics(truth, raw),
+            points=PointMetrics(
+                recall=self.true_positive / max(self.true_points, 1),
+                precision=self.true_positive / max(self.predicted_points, 1),
+                n_true=self.true_points,
+            ),
+            reconstruction=reconstruction,
+        )
 
 
 def format_report(result: EvaluationResult) -> str:

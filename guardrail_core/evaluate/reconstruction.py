@@ -134,19 +134,47 @@ def units_in_view(
     point_object : (N,) int: the truth object id of every point
     objects : ``truth/objects.json``
     """
-    out: dict[int, int] = {}
-    for t in truth_guardrails(objects):
-        own = xyz[np.asarray(point_object) == t["id"], :2]
-        poles = np.array([p["position"][:2] for p in t["poles"]], np.float64).reshape(-1, 2)
-        if len(own) == 0 or len(poles) == 0:
-            out[t["id"]] = 0
-            continue
-        counts = np.array(
-            [len(c) for c in cKDTree(own).query_ball_point(poles, match.pole_reach_m)]
-        )
-        seen = counts >= match.pole_points
-        out[t["id"]] = int(sum(seen[u["start_pole"]] and seen[u["end_pole"]] for u in t["units"]))
-    return out
+    counter = PolePointCounter(objects, match)
+    counter.add(xyz, point_object)
+    return counter.units_in_view()
+
+
+class PolePointCounter:
+    """Points of each true guardrail within ``match.pole_reach_m`` of each of its poles,
+    counted piece by piece (a drive read tile by tile); :meth:`units_in_view` as the function
+    of that name."""
+
+    def __init__(
+        self, objects: list[dict], match: ReconstructionMatch = ReconstructionMatch()
+    ) -> None:
+        self.match = match
+        self.guardrails = truth_guardrails(objects)
+        self.poles = [
+            np.array([p["position"][:2] for p in t["poles"]], np.float64).reshape(-1, 2)
+            for t in self.guardrails
+        ]
+        self.counts = [np.zeros(len(p), np.int64) for p in self.poles]
+
+    def add(self, xyz: np.ndarray, point_object: np.ndarray) -> None:
+        """Count (n, 3) points with their (n,) object ids."""
+        point_object = np.asarray(point_object)
+        for t, poles, counts in zip(self.guardrails, self.poles, self.counts, strict=True):
+            own = np.asarray(xyz)[point_object == t["id"], :2]
+            if len(own) == 0 or len(poles) == 0:
+                continue
+            near = cKDTree(own).query_ball_point(poles, self.match.pole_reach_m)
+            counts += np.array([len(c) for c in near], np.int64)
+
+    def units_in_view(self) -> dict[int, int]:
+        out: dict[int, int] = {}
+        for t, counts in zip(self.guardrails, self.counts, strict=True):
+            seen = counts >= self.match.pole_points
+            out[t["id"]] = (
+                int(sum(bool(seen[u["start_pole"]] and seen[u["end_pole"]]) for u in t["units"]))
+                if len(seen)
+                else 0
+            )
+        return out
 
 
 def _truth_frame(truth: dict, unit: int, frame: UnitFrame) -> UnitFrame:

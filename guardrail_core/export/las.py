@@ -10,33 +10,32 @@ dimensions (documented in ``docs/run-folder.md``, *Exporting to LAS*):
 * ``guardrail_probability`` (float32): the segment's probability of guardrail; -1 without one
 * ``run_id`` (int32): the reconstructed guardrail run of a guardrail point; -1 if none
 
-The point file of the drive is read once, as it is, and converted to LAS 1.4 point format 6
-(7 or 8 when it has colours or near infrared), so every dimension it had (GPS time, intensity,
-returns, flags, the scan lattice, colours) is kept. The output is written to a hidden file beside
-``OUT`` and renamed when complete (:func:`guardrail_core.formats.atomic.atomic_file`); it may
-never be one of the files the export reads.
+The drive's point tiles (``points/index.json``; a format 1.x drive's one points file) are read
+as they are and converted to LAS 1.4 point format 6 (7 or 8 when they have colours or near
+infrared), so every dimension they had (GPS time, intensity, returns, flags, the scan lattice,
+colours) is kept. A survey-scale drive does not fit in memory, so the export goes tile by tile,
+twice: once for the guardrail points (the runs are grouped over all of them) and the check that
+the run was made from this drive, once to convert and append each tile to the output. The output
+is written to a hidden file beside ``OUT`` and renamed when complete
+(:func:`guardrail_core.formats.atomic.atomic_file`); it may never be one of the files the export
+reads.
 """
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from datetime import date
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import laspy
 import numpy as np
 from scipy.spatial import cKDTree
 
-from guardrail_core.errors import (
-    DriveFormatError,
-    ExportError,
-    MissingDriveFileError,
-    RunFolderError,
-)
+from guardrail_core.errors import DriveFormatError, ExportError, RunFolderError
+from guardrail_core.export.drive_points import DrivePoints, read_drive_points, read_point_file
 from guardrail_core.formats.atomic import atomic_file, check_output
-from guardrail_core.formats.drive import FORMAT_NAME, FORMAT_VERSION, drive_parts
+from guardrail_core.formats.drive import drive_parts
 from guardrail_core.formats.run_folder_paths import RunFolder
 from guardrail_core.io.las import SCALE_M  # 0.1 mm, as the drive writer stores points
 from guardrail_core.reconstruct.pipeline import guardrail_mask
@@ -64,6 +63,7 @@ NO_RUN = -1
 #: The extra dimensions the export adds (replacing same-named ones of the drive's file).
 EXPORT_DIMENSIONS = ("segment_id", "guardrail_probability", "run_id")
 SOFTWARE = "guardrail export"
+
 
 _CRS_VLRS = (
     "WktCoordinateSystemVlr",
@@ -123,7 +123,7 @@ def export_run_las(
     -------
     An :class:`ExportSummary`. Coordinates are map coordinates (local + the drive's origin) with
     the origin as LAS offset and a 0.1 mm scale; classes and extra dimensions as in the module
-    docstring.
+    docstring. The drive's points are held one tile at a time.
 
     Raises
     ------
@@ -131,17 +131,19 @@ def export_run_las(
         ``out`` exists and ``overwrite`` is false.
     InputInsideOutputError
         ``out`` is one of the files the export reads or a part of the drive or the run folder
-        (the drive's point file, ``reconstruction/models.json``), or replaces a file in one of
-        their folders (``images/``, ``crops/``); checked before any work.
+        (a point tile, ``reconstruction/models.json``), or replaces a file in one of their
+        folders (``points/``, ``images/``, ``crops/``); checked before any work.
     OutputKindError
         ``out`` is a folder.
     ExportError
         ``out`` is not a ``.las``/``.laz`` path, or a point lies too far from the origin for
         32-bit LAS coordinates.
     RunFolderError
-        The run folder cannot be read, or was made from a drive with another number of points.
+        The run folder cannot be read, or was made from another drive (another number of
+        points, or other points).
     DriveError
-        The drive's ``drive.json`` or point file is missing or unreadable.
+        The drive's ``drive.json``, tile index or a point tile is missing or unreadable, a tile
+        holds another number of points than the index says, or the tiles differ in point format.
     """
     out = Path(out)
     compress = _compression(out)
@@ -152,106 +154,51 @@ def export_run_las(
     run = folder.load()
     if drive_dir is None:
         drive_dir = Path(run.info.drive.path)
-    crs, origin, points_path = _read_drive_json(Path(drive_dir))
-    inputs = [*run_inputs, *drive_parts(drive_dir), points_path]
+    drive = read_drive_points(Path(drive_dir))
+    # The tiles before the drive's folders: an output that is a tile is "the input" itself.
+    inputs = [*run_inputs, *(f.path for f in drive.files), *drive_parts(drive_dir)]
     check_output(out, folder=False, overwrite=overwrite, inputs=inputs)
-    try:
-        src = laspy.read(str(points_path))
-    except (laspy.errors.LaspyException, OSError, ValueError) as exc:
-        raise DriveFormatError(f"{points_path}: not a readable LAS/LAZ file ({exc})") from exc
 
-    n = len(src.points)
+    starts = drive.starts()
+    n = int(starts[-1])
     segment = np.asarray(run.point_segment, np.int64)
     n_segments = len(run)
     if segment.shape != (n,):
         raise RunFolderError(
-            f"{run.root}: made from a drive of {len(segment)} points, but {points_path} has {n}; "
+            f"{run.root}: made from a drive of {len(segment)} points, but {drive_dir} has {n}; "
             "give the run's drive with --drive"
         )
     if n and (segment.min() < -2 or segment.max() >= n_segments):
         raise RunFolderError(
             f"{run.root}: points.npz names segments outside -2..{n_segments - 1}; damaged run folder"
         )
-    _check_same_drive(run.root, run.segments, segment, np.asarray(src.gps_time), points_path)
+    guardrail_index = np.flatnonzero(guardrail_mask(segment, run.segments["label"]))
 
-    guardrail = guardrail_mask(segment, run.segments["label"])
-    guardrail_index = np.flatnonzero(guardrail)
-    # Local coordinates of the guardrail points only: the poles and runs are in the local frame.
-    local = (
-        np.column_stack([src.X[guardrail_index], src.Y[guardrail_index], src.Z[guardrail_index]])
-        * np.asarray(src.header.scales, np.float64)
-        + np.asarray(src.header.offsets, np.float64)
-        - origin
-    )
+    scan = _scan_tiles(drive, starts, segment, guardrail_index, n_segments)
+    _check_same_drive(run.root, run.segments, segment, scan, Path(drive_dir))
     warnings: list[str] = []
-    on_pole, run_of_guardrail = _reconstruction_labels(folder, local, warnings)
-
-    fmt = _point_format(src.point_format)
-    las = laspy.convert(src, point_format_id=fmt, file_version="1.4")
-    if "scan_angle_rank" in src.point_format.dimension_names:
-        # Formats 0-5 keep whole degrees in an int8; 6-10 keep 0.006 degree steps in an int16
-        # under another name, which laspy's conversion does not carry over.
-        las.scan_angle = np.round(np.asarray(src.scan_angle_rank, np.float64) / 0.006).astype(
-            np.int16
-        )
-    del src  # the converted copy holds everything now
-    _to_map_scaling(las, origin, out)
-
-    original = np.asarray(las.classification, np.uint8)
-    classification = original.copy()
-    road = (segment == -1) & np.isin(original, UNCLASSIFIED)
-    classification[road] = CLASS_ROAD_SURFACE
-    classification[guardrail_index] = CLASS_GUARDRAIL
-    classification[guardrail_index[on_pole]] = CLASS_GUARDRAIL_POLE
-    las.classification = classification
-
-    probability = np.full(n, NO_PROBABILITY, np.float32)
-    inside = segment >= 0
-    segment_probability = np.asarray(run.segments["probability"], np.float32)
-    segment_probability = np.where(
-        np.isnan(segment_probability), np.float32(NO_PROBABILITY), segment_probability
+    on_pole, run_of_guardrail = _reconstruction_labels(folder, scan.guardrail_xyz, warnings)
+    probability = np.asarray(run.segments["probability"], np.float32)
+    labels = _RunLabels(
+        segment=segment,
+        segment_probability=np.where(
+            np.isnan(probability), np.float32(NO_PROBABILITY), probability
+        ),
+        guardrail_index=guardrail_index,
+        on_pole=on_pole,
+        run_of_guardrail=run_of_guardrail,
     )
-    probability[inside] = segment_probability[segment[inside]]
-    run_id = np.full(n, NO_RUN, np.int32)
-    run_id[guardrail_index] = run_of_guardrail
-
-    present = [d for d in EXPORT_DIMENSIONS if d in las.point_format.extra_dimension_names]
-    if present:  # a drive imported from an earlier export: the run's values replace them
-        las.remove_extra_dims(present)
-    las.add_extra_dims(
-        [
-            laspy.ExtraBytesParams(
-                "segment_id", np.int32, description="segment; -1 road, -2 off road"
-            ),
-            laspy.ExtraBytesParams(
-                "guardrail_probability",
-                np.float32,
-                description="P(guardrail) of segment; -1 none",
-                no_data=[NO_PROBABILITY],
-            ),
-            laspy.ExtraBytesParams(
-                "run_id", np.int32, description="guardrail run; -1 none", no_data=[NO_RUN]
-            ),
-        ]
-    )
-    las.segment_id = segment.astype(np.int32)
-    las.guardrail_probability = probability
-    las.run_id = run_id
-
-    written_crs = _set_crs(las.header, crs, warnings)
-    las.header.generating_software = SOFTWARE
-    las.header.creation_date = date.today()
     with atomic_file(out, overwrite=overwrite, inputs=inputs) as f:
-        las.write(f, do_compress=compress)
+        written = _write_tiles(f, drive, starts, scan.kept, labels, compress, out, warnings)
     return ExportSummary(
         out=out,
         points=n,
         guardrail_points=len(guardrail_index),
         pole_points=int(on_pole.sum()),
-        road_points=int(road.sum()),
+        road_points=written.road_points,
         run_points=int((run_of_guardrail >= 0).sum()),
-        point_format=fmt,
-        crs=written_crs,
+        point_format=written.point_format,
+        crs=written.crs,
         warnings=tuple(warnings),
     )
 
@@ -277,47 +224,62 @@ def _compression(out: Path) -> bool:
     return suffix == ".laz"
 
 
-def _read_drive_json(root: Path) -> tuple[str, np.ndarray, Path]:
-    """The drive's ``crs``, ``origin`` (3,) float64 and point file, from ``drive.json`` alone.
+@dataclass(frozen=True)
+class _Scan:
+    """What the first pass over the tiles gathers.
 
-    The export needs nothing else of the drive, and reads the point file once itself (with
-    every dimension it has), so it does not load the whole drive with ``load_drive``.
+    Attributes
+    ----------
+    guardrail_xyz : (M, 3) float64, metres, local frame: the guardrail points in drive order
+    first, last : (S,) float64 GPS seconds: the time of each segment's first and last point
+    kept : a one-tile drive's points, read once for both passes; None for more tiles
     """
-    path = root / "drive.json"
-    if not path.is_file():
-        raise MissingDriveFileError(
-            f"{root}: not a drive folder (no drive.json); give the run's drive with --drive"
+
+    guardrail_xyz: np.ndarray
+    first: np.ndarray
+    last: np.ndarray
+    kept: laspy.LasData | None
+
+
+def _scan_tiles(
+    drive: DrivePoints,
+    starts: np.ndarray,
+    segment: np.ndarray,
+    guardrail_index: np.ndarray,
+    n_segments: int,
+) -> _Scan:
+    """Read the tiles once for the guardrail points and each segment's time range.
+
+    Parameters
+    ----------
+    starts : (T + 1,) int64, the drive-wide index of each tile's first point, then the total
+    segment : (N,) int64, the segment of every drive point
+    guardrail_index : (M,) int64, ascending: the drive's guardrail points
+    """
+    first = np.full(n_segments, np.inf)
+    last = np.full(n_segments, -np.inf)
+    parts = [np.zeros((0, 3))]
+    src = None
+    for file, start, stop in zip(drive.files, starts[:-1], starts[1:], strict=True):
+        src = read_point_file(file)
+        mine = segment[start:stop]
+        inside = mine >= 0
+        gps_time = np.asarray(src.gps_time, np.float64)
+        np.minimum.at(first, mine[inside], gps_time[inside])
+        np.maximum.at(last, mine[inside], gps_time[inside])
+        lo, hi = np.searchsorted(guardrail_index, [start, stop])
+        index = guardrail_index[lo:hi] - start
+        parts.append(
+            np.column_stack([src.X[index], src.Y[index], src.Z[index]])
+            * np.asarray(src.header.scales, np.float64)
+            + np.asarray(src.header.offsets, np.float64)
+            - drive.origin
         )
-    try:
-        meta = json.loads(path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise DriveFormatError(f"{path}: not valid JSON ({exc})") from exc
-    if not isinstance(meta, dict) or meta.get("format") != FORMAT_NAME:
-        raise DriveFormatError(f"{path}: not a {FORMAT_NAME} description")
-    if str(meta.get("format_version")).split(".")[0] != FORMAT_VERSION.split(".")[0]:
-        raise DriveFormatError(
-            f"{path}: format_version {meta.get('format_version')} is not readable by this "
-            f"version (reads {FORMAT_VERSION.split('.')[0]}.x)"
-        )
-    try:
-        crs = str(meta["crs"])
-        origin = np.asarray(meta["origin"], np.float64)
-        points = root / str(meta["files"]["points"])
-    except (KeyError, TypeError, ValueError) as exc:
-        raise DriveFormatError(f"{path}: lacks the key or value {exc}") from exc
-    if origin.shape != (3,) or not np.all(np.isfinite(origin)):
-        raise DriveFormatError(f"{path}: origin must be three finite numbers")
-    if not points.is_file():
-        raise MissingDriveFileError(f"{root}: point cloud {points.name!r} is missing")
-    return crs, origin, points
+    return _Scan(np.concatenate(parts), first, last, src if len(drive.files) == 1 else None)
 
 
 def _check_same_drive(
-    run_dir: Path,
-    segments: dict[str, np.ndarray],
-    segment: np.ndarray,
-    gps_time: np.ndarray,
-    points_path: Path,
+    run_dir: Path, segments: dict[str, np.ndarray], segment: np.ndarray, scan: _Scan, drive: Path
 ) -> None:
     """Refuse a drive with as many points as the run's but other ones.
 
@@ -325,23 +287,147 @@ def _check_same_drive(
     seconds) among the drive's points: another drive, or the same drive's points reordered,
     fails this even with the same point count.
     """
-    inside = segment >= 0
     n_segments = len(segments["n_points"])
-    count = np.bincount(segment[inside], minlength=n_segments)
-    first = np.full(n_segments, np.inf)
-    last = np.full(n_segments, -np.inf)
-    np.minimum.at(first, segment[inside], gps_time[inside])
-    np.maximum.at(last, segment[inside], gps_time[inside])
+    count = np.bincount(segment[segment >= 0], minlength=n_segments)
     time = np.asarray(segments["time"], np.float64)
     if not (
         np.array_equal(count, np.asarray(segments["n_points"]))
-        and np.allclose(first, time[:, 0], rtol=0, atol=1e-6)
-        and np.allclose(last, time[:, 1], rtol=0, atol=1e-6)
+        and np.allclose(scan.first, time[:, 0], rtol=0, atol=1e-6)
+        and np.allclose(scan.last, time[:, 1], rtol=0, atol=1e-6)
     ):
         raise RunFolderError(
-            f"{run_dir}: its segments do not match the points of {points_path} (other points or "
-            "GPS times): the run was made from another drive; give the run's drive with --drive"
+            f"{run_dir}: its segments do not match the points of the drive {drive} (other points "
+            "or GPS times): the run was made from another drive; give the run's drive with --drive"
         )
+
+
+@dataclass(frozen=True)
+class _RunLabels:
+    """What the run made of the drive's points.
+
+    Attributes
+    ----------
+    segment : (N,) int64, the segment of every drive point (-1 road, -2 off road)
+    segment_probability : (S,) float32, P(guardrail) of each segment (``NO_PROBABILITY``: none)
+    guardrail_index : (M,) int64, ascending: the guardrail points
+    on_pole : (M,) bool; run_of_guardrail : (M,) int32: their pole and reconstructed run
+    """
+
+    segment: np.ndarray
+    segment_probability: np.ndarray
+    guardrail_index: np.ndarray
+    on_pole: np.ndarray
+    run_of_guardrail: np.ndarray
+
+
+@dataclass(frozen=True)
+class _Written:
+    """What :func:`_write_tiles` wrote: the LAS point format id, the CRS (None: none), and how
+    many points became road surface."""
+
+    point_format: int
+    crs: str | None
+    road_points: int
+
+
+def _write_tiles(
+    f: BinaryIO,
+    drive: DrivePoints,
+    starts: np.ndarray,
+    kept: laspy.LasData | None,
+    labels: _RunLabels,
+    compress: bool,
+    out: Path,
+    warnings: list[str],
+) -> _Written:
+    """Convert and label the tiles one by one and append them to ``f``, a LAS 1.4 file whose
+    header (CRS, point format, extra dimensions) is the first tile's."""
+    writer: laspy.LasWriter | None = None
+    written = _Written(point_format=6, crs=None, road_points=0)
+    evlrs = None
+    for k, file in enumerate(drive.files):
+        las = _converted(kept if kept is not None else read_point_file(file), drive.origin, out)
+        road = _label(las, labels, int(starts[k]), int(starts[k + 1]))
+        if writer is None:
+            crs = _set_crs(las.header, drive.crs, warnings)
+            las.header.generating_software = SOFTWARE
+            las.header.creation_date = date.today()
+            written, evlrs = _Written(las.header.point_format.id, crs, 0), las.evlrs
+            # Closed only when complete: after a failure atomic_file removes the partial file.
+            writer = laspy.LasWriter(f, las.header, do_compress=compress, closefd=False)
+        elif las.point_format != writer.header.point_format:
+            raise DriveFormatError(
+                f"{file.path}: point format {las.point_format.id} with extra dimensions "
+                f"{list(las.point_format.extra_dimension_names)} differs from the first tile's "
+                f"({drive.files[0].path}); the tiles of a drive share one point format"
+            )
+        if len(las.points):
+            writer.write_points(las.points)
+        written = _Written(written.point_format, written.crs, written.road_points + road)
+    if writer is not None:  # read_drive_points refuses a drive without tiles
+        if evlrs is not None:
+            writer.write_evlrs(evlrs)
+        writer.close()
+    return written
+
+
+def _converted(src: laspy.LasData, origin: np.ndarray, out: Path) -> laspy.LasData:
+    """A tile as LAS 1.4 point format 6, 7 or 8 (:func:`_point_format`) in map coordinates with
+    the drive's origin as offset."""
+    las = laspy.convert(src, point_format_id=_point_format(src.point_format), file_version="1.4")
+    if "scan_angle_rank" in src.point_format.dimension_names:
+        # Formats 0-5 keep whole degrees in an int8; 6-10 keep 0.006 degree steps in an int16
+        # under another name, which laspy's conversion does not carry over.
+        las.scan_angle = np.round(np.asarray(src.scan_angle_rank, np.float64) / 0.006).astype(
+            np.int16
+        )
+    _to_map_scaling(las, origin, out)
+    return las
+
+
+def _label(las: laspy.LasData, labels: _RunLabels, start: int, stop: int) -> int:
+    """Give the tile of drive points ``start:stop`` the run's classes and extra dimensions;
+    return how many became road surface."""
+    segment = labels.segment[start:stop]
+    lo, hi = np.searchsorted(labels.guardrail_index, [start, stop])
+    guardrail_index = labels.guardrail_index[lo:hi] - start
+    original = np.asarray(las.classification, np.uint8)
+    classification = original.copy()
+    road = (segment == -1) & np.isin(original, UNCLASSIFIED)
+    classification[road] = CLASS_ROAD_SURFACE
+    classification[guardrail_index] = CLASS_GUARDRAIL
+    classification[guardrail_index[labels.on_pole[lo:hi]]] = CLASS_GUARDRAIL_POLE
+    las.classification = classification
+
+    probability = np.full(len(segment), NO_PROBABILITY, np.float32)
+    inside = segment >= 0
+    probability[inside] = labels.segment_probability[segment[inside]]
+    run_id = np.full(len(segment), NO_RUN, np.int32)
+    run_id[guardrail_index] = labels.run_of_guardrail[lo:hi]
+
+    present = [d for d in EXPORT_DIMENSIONS if d in las.point_format.extra_dimension_names]
+    if present:  # a drive imported from an earlier export: the run's values replace them
+        las.remove_extra_dims(present)
+    las.add_extra_dims(
+        [
+            laspy.ExtraBytesParams(
+                "segment_id", np.int32, description="segment; -1 road, -2 off road"
+            ),
+            laspy.ExtraBytesParams(
+                "guardrail_probability",
+                np.float32,
+                description="P(guardrail) of segment; -1 none",
+                no_data=[NO_PROBABILITY],
+            ),
+            laspy.ExtraBytesParams(
+                "run_id", np.int32, description="guardrail run; -1 none", no_data=[NO_RUN]
+            ),
+        ]
+    )
+    las.segment_id = segment.astype(np.int32)
+    las.guardrail_probability = probability
+    las.run_id = run_id
+    return int(road.sum())
 
 
 def _reconstruction_labels(

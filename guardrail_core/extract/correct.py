@@ -83,7 +83,7 @@ class CorrectionParams(StageParams):
 
 @dataclass(frozen=True)
 class SegmentExtents:
-    """Where each segment lies in track coordinates (see :mod:`guardrail_core.extract.track`).
+    """Where each segment lies in track coordinates (see :mod:`guardrail_core.sensors.track`).
 
     Attributes
     ----------

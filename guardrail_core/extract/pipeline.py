@@ -30,10 +30,10 @@ from guardrail_core.extract.segments import (
     wireframe_components,
 )
 from guardrail_core.extract.shape_features import segment_features
-from guardrail_core.extract.track import track_coordinates
 from guardrail_core.formats.drive import Drive
 from guardrail_core.formats.run_folder import POINT_OFF_ROAD, POINT_ROAD
 from guardrail_core.params import ParameterError, StageParams
+from guardrail_core.sensors.track import TrackCoordinates, track_coordinates
 from guardrail_core.timing import StageTimer
 
 
@@ -109,10 +109,17 @@ def segment_extents(segments: Segments, summary: SegmentSummary) -> SegmentExten
 
 
 def slice_drive(
-    drive: Drive, params: ExtractionParams = ExtractionParams(), *, timer: StageTimer | None = None
+    drive: Drive,
+    params: ExtractionParams = ExtractionParams(),
+    *,
+    timer: StageTimer | None = None,
+    track: TrackCoordinates | None = None,
 ) -> tuple[np.ndarray, Segments, SegmentSummary, np.ndarray]:
     """The geometric stages of §3.1: road removal, wireframe components (fragments joined to
     their neighbours), 0.5 m slices, and the segments' shape features.
+
+    ``track`` : the points' track coordinates where the caller has them already (a tile
+    computes them to choose its points).
 
     Returns ``point_segment`` (N,) int32 (segment, POINT_ROAD or POINT_OFF_ROAD), the segments,
     their summary and their (S, SEGMENT_FEATURE_DIM) float32 features.
@@ -127,8 +134,9 @@ def slice_drive(
     n = len(points)
     if n == 0:
         raise EmptyDriveError(f"{drive.root}: the drive has no points")
-    with timer.stage("track", points=n):
-        track = track_coordinates(points.xyz, points.gps_time, drive.trajectory)
+    if track is None:
+        with timer.stage("track", points=n):
+            track = track_coordinates(points.xyz, points.gps_time, drive.trajectory)
     with timer.stage("lattice", points=n):
         lattice = build_lattice(points.rotation, points.phase, drive.scanner.points_per_rotation)
     with timer.stage("road_removal", points=n):
@@ -166,10 +174,14 @@ def extract(
     *,
     timer: StageTimer | None = None,
     progress: bool = False,
+    track: TrackCoordinates | None = None,
 ) -> Extraction:
-    """Slice a drive (§3.1) and crop every segment's image (§3.2) at ``crop_size`` pixels."""
+    """Slice a drive (§3.1) and crop every segment's image (§3.2) at ``crop_size`` pixels
+    (``track``: see :func:`slice_drive`)."""
     timer = timer or StageTimer(len(drive.points))
-    point_segment, segments, summary, features = slice_drive(drive, params, timer=timer)
+    point_segment, segments, summary, features = slice_drive(
+        drive, params, timer=timer, track=track
+    )
     with timer.stage("crops", points=int(segments.n_points.sum())):
         with tqdm(
             total=len(drive.images), desc="choosing images", unit="image", disable=not progress

@@ -14,8 +14,8 @@ import numpy as np
 
 from guardrail_core.errors import InvalidOptionError
 from guardrail_core.extract.lattice import Lattice, lattice_normals
-from guardrail_core.extract.track import TrackCoordinates
 from guardrail_core.params import StageParams, param
+from guardrail_core.sensors.track import TrackCoordinates
 
 # Codes of :func:`remove_road`'s ``kept`` result for the points that are not kept.
 ROAD = 1

@@ -256,7 +256,7 @@ def slice_components(
     Parameters
     ----------
     component : (N,) int, component of every point, -1 for points not kept
-    station : (N,) float64, metres along the trajectory (see :mod:`guardrail_core.extract.track`)
+    station : (N,) float64, metres along the trajectory (see :mod:`guardrail_core.sensors.track`)
     params : slice length, and how wide slices are cut across
     lateral : (N,) float64, metres left of the trajectory; with it, slices wider than
         ``params.max_width_m`` are cut where their points thin out across the trajectory

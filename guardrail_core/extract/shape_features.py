@@ -71,7 +71,7 @@ def shape_features(
     Parameters
     ----------
     station, lateral, height : (N,) float64, metres, track coordinates of every point
-        (see :mod:`guardrail_core.extract.track`)
+        (see :mod:`guardrail_core.sensors.track`)
     intensity : (N,) uint16, return intensity
     segments : the sliced segments of those N points
     slice_length_m : the slice length the segments were cut with

@@ -3,12 +3,14 @@
 Layout (documented in ``docs/drive-format.md``)::
 
     drive.json        format version, CRS, float64 local origin, scanner, file names
-    points.laz        LAS 1.4 (or points.las): gps_time, intensity, extra dims rotation, phase
+    points/           LAS 1.4 tiles along the trajectory (gps_time, intensity, extra dims
+                      rotation, phase) and their index.json (formats/drive_tiles.py); format 1.x
+                      drives hold one points.laz instead, read as one tile
     trajectory.csv    time, x, y, z (map coordinates), roll, pitch, yaw (radians)
     cameras.json      intrinsics, Brown-Conrady distortion, T_vehicle_camera per camera
     images.json       one record per image: file, camera, gps_time, T_world_camera (map frame)
     images/<camera>/<n>.jpg
-    truth/            synthetic drives only: points.npz (class, object_id per point),
+    truth/            synthetic drives only: points/<tile>.npz (class, object_id per point),
                       masks/<camera>/<n>.png (class per pixel), objects.json (exact geometry)
 
 :func:`load_drive` validates everything and raises a named :class:`~guardrail_core.errors.DriveError`
@@ -20,8 +22,11 @@ write never leaves a half-written drive and never deletes one of their inputs.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
+import math
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -35,13 +40,22 @@ from guardrail_core.errors import (
     NonFiniteCoordinatesError,
     TimestampMismatchError,
 )
-from guardrail_core.io.las import read_points, write_points
+from guardrail_core.formats.drive_tiles import (
+    INDEX_FILE,
+    TiledPointWriter,
+    TileIndex,
+    TileRecord,
+    read_tile_index,
+)
+from guardrail_core.io.las import read_header_summary, read_points
 from guardrail_core.sensors.camera import Camera
 from guardrail_core.sensors.scanner import ScannerParams
 from guardrail_core.sensors.trajectory import Trajectory
 
 FORMAT_NAME = "guardrail-drive"
-FORMAT_VERSION = "1.1"
+FORMAT_VERSION = "2.0"
+#: Major versions this reader reads: 1.x (one points file) and 2.x (tiles with an index).
+READS_MAJOR = ("1", "2")
 TRAJECTORY_COLUMNS = ("time", "x", "y", "z", "roll", "pitch", "yaw")
 
 
@@ -117,6 +131,14 @@ class Drive:
     images: list[ImageRecord]
     truth: Truth | None = None
     source: dict = field(default_factory=dict)
+    #: the point tiles the points came from (None: one tile of all the points)
+    tiles: TileIndex | None = None
+
+    def tile_offsets(self) -> np.ndarray:
+        """(T + 1,) int64: the index of each point tile's first point, then the total."""
+        if self.tiles is None or self.tiles.points != len(self.points):
+            return np.array([0, len(self.points)], np.int64)
+        return self.tiles.offsets()
 
     def read_image(self, record: ImageRecord) -> np.ndarray:
         """The image (H, W, 3) uint8 RGB of a record."""
@@ -221,8 +243,109 @@ def _camera_from_json(item: dict, where: str) -> Camera:
         raise DriveFormatError(f"{where}: a camera lacks the key {exc.args[0]!r}") from exc
 
 
-def load_drive(root: str | os.PathLike, *, with_truth: bool = True) -> Drive:
-    """Load and validate a drive folder.
+@dataclass
+class DriveSource:
+    """A drive folder opened without reading its points: everything but the point tiles, which
+    :meth:`read_tiles` reads on demand (survey-scale drives do not fit in memory whole).
+
+    Attributes
+    ----------
+    tiles : the point tiles in time order (format 1.x drives: their one points file)
+    has_truth : the drive has truth (and truth was asked for)
+    objects : ``truth/objects.json`` (synthetic drives; empty otherwise)
+    """
+
+    root: Path
+    crs: str
+    origin: np.ndarray
+    scanner: ScannerParams
+    trajectory: Trajectory
+    cameras: dict[str, Camera]
+    images: list[ImageRecord]
+    tiles: TileIndex
+    has_truth: bool
+    objects: list[dict]
+    source: dict = field(default_factory=dict)
+
+    def read_tiles(self, ids: Sequence[int]) -> tuple[PointCloud, Truth | None]:
+        """The points of tiles ``ids`` (ascending), concatenated, and their truth.
+
+        Raises
+        ------
+        MissingDriveFileError, DriveFormatError, DriveDimensionError, NonFiniteCoordinatesError,
+        TimestampMismatchError
+            Naming the tile file that is missing or wrong.
+        """
+        parts = [self._read_tile(int(i)) for i in ids]
+        if not parts:
+            empty = PointCloud(
+                np.zeros((0, 3)),
+                np.zeros(0),
+                np.zeros(0, np.uint16),
+                *([np.zeros(0, np.int64)] * 2),
+            )
+            truth_arrays = (np.zeros(0, np.uint8), np.zeros(0, np.int32))
+            parts = [(empty, truth_arrays if self.has_truth else None)]
+        clouds = [p for p, _ in parts]
+        points = PointCloud(
+            *(np.concatenate([getattr(c, name) for c in clouds]) for name in _CLOUD_FIELDS)
+        )
+        truth = None
+        if self.has_truth:
+            truth = Truth(
+                np.concatenate([t[0] for _, t in parts if t is not None]),
+                np.concatenate([t[1] for _, t in parts if t is not None]),
+                self.objects,
+                _mask_files(self.images),
+            )
+        return points, truth
+
+    def drive(self, points: PointCloud, truth: Truth | None = None) -> Drive:
+        """A :class:`Drive` of these points (a window of this drive, or all of it)."""
+        return Drive(
+            root=self.root,
+            crs=self.crs,
+            origin=self.origin,
+            scanner=self.scanner,
+            trajectory=self.trajectory,
+            points=points,
+            cameras=self.cameras,
+            images=self.images,
+            truth=truth,
+            source=self.source,
+        )
+
+    def _read_tile(self, i: int) -> tuple[PointCloud, tuple[np.ndarray, np.ndarray] | None]:
+        record = self.tiles.tiles[i]
+        points = _load_points(self.root / record.file, self.origin, self.scanner)
+        if len(points) != record.points:
+            raise DriveDimensionError(
+                f"{self.root / record.file}: holds {len(points)} points, the tile index says "
+                f"{record.points}"
+            )
+        t_lo, t_hi = self.trajectory.time[0], self.trajectory.time[-1]
+        if len(points) and (points.gps_time.min() < t_lo or points.gps_time.max() > t_hi):
+            raise TimestampMismatchError(
+                f"{self.root / record.file}: points span GPS time {points.gps_time.min():.6f}.."
+                f"{points.gps_time.max():.6f} s but the trajectory covers only "
+                f"{t_lo:.6f}..{t_hi:.6f} s"
+            )
+        truth = None
+        if self.has_truth:
+            if record.truth is None:
+                raise MissingDriveFileError(f"{self.root}: tile {record.file} has no truth file")
+            truth = _load_truth_arrays(self.root / record.truth, len(points))
+        return points, truth
+
+
+_CLOUD_FIELDS = ("xyz", "gps_time", "intensity", "rotation", "phase")
+
+
+def open_drive(root: str | os.PathLike, *, with_truth: bool = True) -> DriveSource:
+    """Open and validate a drive folder, reading everything but its points.
+
+    Reads format 2.x (point tiles with ``points/index.json``) and 1.x (one points file, which
+    becomes one tile).
 
     Raises
     ------
@@ -237,10 +360,11 @@ def load_drive(root: str | os.PathLike, *, with_truth: bool = True) -> Drive:
     if not isinstance(meta, dict) or meta.get("format") != FORMAT_NAME:
         raise DriveFormatError(f"{root / 'drive.json'}: not a {FORMAT_NAME} description")
     version = str(meta.get("format_version"))
-    if version.split(".")[0] != FORMAT_VERSION.split(".")[0]:
+    major = version.split(".")[0]
+    if major not in READS_MAJOR:
         raise DriveFormatError(
             f"{root / 'drive.json'}: format_version {version} is not readable by this version "
-            f"(reads {FORMAT_VERSION.split('.')[0]}.x)"
+            f"(reads {', '.join(m + '.x' for m in READS_MAJOR)})"
         )
     try:
         origin = _matrix(meta["origin"], (3,), "drive.json: origin")
@@ -252,13 +376,13 @@ def load_drive(root: str | os.PathLike, *, with_truth: bool = True) -> Drive:
         raise DriveFormatError(f"{root / 'drive.json'}: lacks the key {exc.args[0]!r}") from exc
 
     trajectory = read_trajectory_csv(root / files["trajectory"], origin, reference_height)
-    points = _load_points(root / files["points"], origin, scanner)
+    has_truth = bool(with_truth and meta.get("truth"))
+    truth_dir = str(meta.get("truth") or "truth")
+    if major == "1":
+        tiles = _single_tile(root, files["points"], truth_dir, trajectory, has_truth)
+    else:
+        tiles = read_tile_index(root, files["points"])
     t_lo, t_hi = trajectory.time[0], trajectory.time[-1]
-    if len(points) and (points.gps_time.min() < t_lo or points.gps_time.max() > t_hi):
-        raise TimestampMismatchError(
-            f"{root}: points span GPS time {points.gps_time.min():.6f}..{points.gps_time.max():.6f} s "
-            f"but the trajectory covers only {t_lo:.6f}..{t_hi:.6f} s"
-        )
 
     camera_list = _read_json(root / files["cameras"], "camera calibration")
     if not isinstance(camera_list, list):
@@ -267,22 +391,61 @@ def load_drive(root: str | os.PathLike, *, with_truth: bool = True) -> Drive:
         c.name: c for c in (_camera_from_json(item, files["cameras"]) for item in camera_list)
     }
     images = _load_images(root, files["images"], cameras, origin, (t_lo, t_hi))
-
-    truth = None
-    if with_truth and meta.get("truth"):
-        truth = _load_truth(root / meta["truth"], len(points), images)
-    return Drive(
+    objects: list[dict] = []
+    if has_truth:
+        loaded = _read_json(root / truth_dir / "objects.json", "truth geometry")
+        if not isinstance(loaded, list):
+            raise DriveFormatError(
+                f"{root / truth_dir / 'objects.json'}: expected a list of objects"
+            )
+        objects = list(loaded)
+    return DriveSource(
         root=root,
         crs=crs,
         origin=origin,
         scanner=scanner,
         trajectory=trajectory,
-        points=points,
         cameras=cameras,
         images=images,
-        truth=truth,
+        tiles=tiles,
+        has_truth=has_truth,
+        objects=objects,
         source=meta.get("source", {}),
     )
+
+
+def load_drive(root: str | os.PathLike, *, with_truth: bool = True) -> Drive:
+    """Load and validate a drive folder with all of its points (see :func:`open_drive`).
+
+    Raises
+    ------
+    MissingDriveFileError, DriveFormatError, DriveDimensionError, TimestampMismatchError,
+    NonFiniteCoordinatesError
+        Each names the file and what is wrong with it.
+    """
+    source = open_drive(root, with_truth=with_truth)
+    points, truth = source.read_tiles(range(len(source.tiles)))
+    return dataclasses.replace(source.drive(points, truth), tiles=source.tiles)
+
+
+def _single_tile(
+    root: Path, name: str, truth_dir: str, trajectory: Trajectory, has_truth: bool
+) -> TileIndex:
+    """The one points file of a format 1.x drive as a tile covering the whole drive (its count
+    and bounds are read from the LAS header alone)."""
+    path = _require(root / name, "point cloud")
+    count, lo, hi = read_header_summary(path)
+    times = (float(trajectory.time[0]), float(trajectory.time[-1]))
+    record = TileRecord(
+        file=name,
+        truth=f"{truth_dir}/points.npz" if has_truth else None,
+        gps_time=times,
+        station_m=(-math.inf, math.inf),  # unknown without reading the points: every window
+        bounds_min=lo,
+        bounds_max=hi,
+        points=count,
+    )
+    return TileIndex((record,))
 
 
 def _load_points(path: Path, origin: np.ndarray, scanner: ScannerParams) -> PointCloud:
@@ -325,27 +488,31 @@ def _load_images(
     return images
 
 
-def _load_truth(folder: Path, n_points: int, images: list[ImageRecord]) -> Truth:
-    npz_path = _require(folder / "points.npz", "truth of the points")
-    with np.load(npz_path, allow_pickle=False) as npz:
-        if "class" not in npz or "object_id" not in npz:
-            raise DriveFormatError(f"{npz_path}: needs the arrays 'class' and 'object_id'")
-        point_class, point_object = npz["class"], npz["object_id"]
+def _load_truth_arrays(path: Path, n_points: int) -> tuple[np.ndarray, np.ndarray]:
+    """Class (N,) uint8 and object id (N,) int32 of a tile's points from its truth file."""
+    _require(path, "truth of the points")
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            if "class" not in npz or "object_id" not in npz:
+                raise DriveFormatError(f"{path}: needs the arrays 'class' and 'object_id'")
+            point_class, point_object = npz["class"], npz["object_id"]
+    except (OSError, ValueError) as exc:
+        raise DriveFormatError(f"{path}: not a readable truth file ({exc})") from exc
     if point_class.shape != (n_points,) or point_object.shape != (n_points,):
         raise DriveDimensionError(
-            f"{npz_path}: truth has {point_class.shape[0]} classes and {point_object.shape[0]} "
+            f"{path}: truth has {point_class.shape[0]} classes and {point_object.shape[0]} "
             f"object ids for {n_points} points"
         )
-    objects = _read_json(folder / "objects.json", "truth geometry")
-    if not isinstance(objects, list):
-        raise DriveFormatError(f"{folder / 'objects.json'}: expected a list of objects")
+    return point_class.astype(np.uint8), point_object.astype(np.int32)
+
+
+def _mask_files(images: list[ImageRecord]) -> dict[str, str]:
+    """Image file -> its truth mask file (synthetic drives)."""
     mask_files = {}
     for record in images:
         mask = Path("truth") / "masks" / Path(record.file).relative_to("images").with_suffix(".png")
         mask_files[record.file] = str(mask)
-    return Truth(
-        point_class.astype(np.uint8), point_object.astype(np.int32), list(objects), mask_files
-    )
+    return mask_files
 
 
 # ----------------------------------------------------------------------------------- saving
@@ -376,9 +543,10 @@ def write_trajectory_csv(path: Path, trajectory: Trajectory, origin: np.ndarray)
         )
 
 
-#: Folders of a drive besides the files ``drive.json`` names; ``review/`` holds the review
+#: Folders of a drive besides the files ``drive.json`` names (``points/``: the tiles);
+#: ``review/`` holds the review
 #: app's labels (``formats.label_store``), which no command may delete either.
-DRIVE_FOLDERS = ("images", "truth", "review")
+DRIVE_FOLDERS = ("points", "images", "truth", "review")
 _DEFAULT_FILES = {
     "points": "points.laz",
     "trajectory": "trajectory.csv",
@@ -420,13 +588,62 @@ def write_drive_files(
     truth: Truth | None,
     source: dict,
     compress: bool = True,
+    tile_m: float | None = None,
 ) -> None:
-    """Write the metadata, trajectory and points of a drive into ``folder``.
+    """Write the metadata, trajectory and points (tiles of ``tile_m`` metres of driving; None:
+    one tile) of a drive held in memory into ``folder``.
 
     Image and mask pixels are written by the producer as it goes (they do not fit in memory for
-    long drives); ``images`` carries their records with poses in the local frame.
+    long drives); ``images`` carries their records with poses in the local frame. Producers of
+    long drives write their points through a :class:`TiledPointWriter` chunk by chunk instead,
+    then call :func:`write_drive_metadata`.
     """
-    points_name = "points.laz" if compress else "points.las"
+    writer = TiledPointWriter(
+        folder,
+        origin=origin,
+        trajectory=trajectory,
+        tile_m=tile_m,
+        compress=compress,
+        with_truth=truth is not None,
+    )
+    writer.append(
+        points.xyz,
+        points.gps_time,
+        points.intensity,
+        points.rotation,
+        points.phase,
+        None if truth is None else truth.point_class,
+        None if truth is None else truth.point_object,
+    )
+    writer.close()
+    write_drive_metadata(
+        folder,
+        crs=crs,
+        origin=origin,
+        scanner=scanner,
+        trajectory=trajectory,
+        cameras=cameras,
+        images=images,
+        objects=None if truth is None else truth.objects,
+        source=source,
+    )
+
+
+def write_drive_metadata(
+    folder: Path,
+    *,
+    crs: str,
+    origin: np.ndarray,
+    scanner: ScannerParams,
+    trajectory: Trajectory,
+    cameras: list[Camera],
+    images: list[ImageRecord],
+    objects: list[dict] | None,
+    source: dict,
+) -> None:
+    """Write ``drive.json``, the trajectory, cameras, image records and (``objects`` given: a
+    synthetic drive) ``truth/objects.json``; the point tiles and their index are written by a
+    :class:`TiledPointWriter`."""
     meta = {
         "format": FORMAT_NAME,
         "format_version": FORMAT_VERSION,
@@ -440,25 +657,16 @@ def write_drive_files(
             "vehicle_frame": "x forward, y left, z up",
         },
         "files": {
-            "points": points_name,
+            "points": INDEX_FILE,
             "trajectory": "trajectory.csv",
             "cameras": "cameras.json",
             "images": "images.json",
         },
-        "truth": "truth" if truth is not None else None,
+        "truth": "truth" if objects is not None else None,
         "source": source,
     }
     (folder / "drive.json").write_text(json.dumps(meta, indent=2))
     write_trajectory_csv(folder / "trajectory.csv", trajectory, origin)
-    write_points(
-        folder / points_name,
-        points.xyz,
-        origin,
-        points.gps_time,
-        points.intensity,
-        points.rotation,
-        points.phase,
-    )
     (folder / "cameras.json").write_text(json.dumps([camera_to_json(c) for c in cameras], indent=2))
     records = []
     for record in images:
@@ -473,10 +681,6 @@ def write_drive_files(
             }
         )
     (folder / "images.json").write_text(json.dumps(records, indent=1))
-    if truth is not None:
+    if objects is not None:
         (folder / "truth").mkdir(exist_ok=True)
-        np.savez_compressed(
-            folder / "truth" / "points.npz",
-            **{"class": truth.point_class, "object_id": truth.point_object},  # type: ignore[arg-type]
-        )
-        (folder / "truth" / "objects.json").write_text(json.dumps(truth.objects, indent=1))
+        (folder / "truth" / "objects.json").write_text(json.dumps(objects, indent=1))

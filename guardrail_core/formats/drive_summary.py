@@ -8,6 +8,7 @@ import numpy as np
 
 from guardrail_core.classes import GUARDRAIL_CLASSES, TruthClass
 from guardrail_core.formats.drive import Drive
+from guardrail_core.formats.drive_tiles import TileIndex
 from guardrail_core.sensors.scanner import MULTIBEAM
 
 
@@ -24,8 +25,9 @@ def _scanner_line(drive: Drive) -> str:
     )
 
 
-def describe_drive(drive: Drive) -> str:
-    """Lines describing the drive's extent, sensors, files and (for synthetic drives) truth."""
+def describe_drive(drive: Drive, tiles: TileIndex | None = None) -> str:
+    """Lines describing the drive's extent, sensors, files, point ``tiles`` (when given) and (for
+    synthetic drives) truth."""
     points, traj = drive.points, drive.trajectory
     length = float(np.sum(np.linalg.norm(np.diff(traj.position, axis=0), axis=1)))
     duration = float(traj.time[-1] - traj.time[0])
@@ -37,6 +39,11 @@ def describe_drive(drive: Drive) -> str:
         f"trajectory {length:.1f} m in {duration:.1f} s ({length / max(duration, 1e-9):.1f} m/s mean), "
         f"{len(traj)} poses",
         f"points     {len(points):,} from {_scanner_line(drive)}",
+        *(
+            [f"tiles      {len(tiles)}, {length / len(tiles):.1f} m of driving each on average"]
+            if tiles is not None and len(tiles)
+            else []
+        ),
         f"images     {len(drive.images)}: "
         + ", ".join(
             f"{name} {n} ({drive.cameras[name].width}x{drive.cameras[name].height})"

@@ -4,7 +4,8 @@
 
     RUN_DIR/
       run.json          format version, drive, model, parameters, counts
-      points.npz        segment (N,) int32 of every drive point; -1 road surface, -2 far from road
+      points/NNNNNN.npz segment (n,) int32 of every point of the drive's tile NNNNNN; -1 road
+                        surface, -2 far from road, -3 not processed (its tile failed)
       segments.npz      one row per segment: geometry, chosen image and rectangle, crop status,
                         probability, raw and corrected labels (see SEGMENT_FIELDS)
       segments.csv      the same table for people and spreadsheets
@@ -31,10 +32,11 @@ from guardrail_core.formats.run_info import RunInfo
 if TYPE_CHECKING:
     from guardrail_core.formats.run_folder_paths import RunFolder
 
-RUN_FORMAT_VERSION = 2  # 2: segments fused from shape and crop (features, crop_probability)
+#: 2: segments fused from shape and crop (features, crop_probability); 3: points/ in tiles
+RUN_FORMAT_VERSION = 3
 #: The files of a run folder (their paths: :class:`guardrail_core.formats.run_folder_paths.RunFolder`).
 RUN_FILE = "run.json"
-POINTS_FILE = "points.npz"
+POINTS_DIR = "points"
 SEGMENTS_FILE = "segments.npz"
 SEGMENTS_CSV = "segments.csv"
 TIMINGS_FILE = "timings.json"
@@ -42,6 +44,8 @@ EMBEDDINGS_FILE = "embeddings.npy"
 CROPS_DIR = "crops"
 POINT_ROAD = -1
 POINT_OFF_ROAD = -2
+#: A point of a processing tile that failed (``run.json`` ``tiles`` says why).
+POINT_UNPROCESSED = -3
 
 # crop_status of segments.npz: what became of a segment's crop (extract/crops.py decides).
 CROP_OK = 0
@@ -116,24 +120,35 @@ def crop_name(segment: int) -> str:
     return f"{CROPS_DIR}/{segment:06d}.jpg"
 
 
+def point_tile_name(tile: int) -> str:
+    """``points/NNNNNN.npz``: the segments of the points of the drive's tile ``tile``."""
+    return f"{POINTS_DIR}/{tile:06d}.npz"
+
+
+def write_point_tile(folder: Path, tile: int, point_segment: np.ndarray) -> None:
+    """Write the segment (n,) int32 of every point of the drive's tile ``tile`` into ``folder``."""
+    path = Path(folder) / point_tile_name(tile)
+    path.parent.mkdir(exist_ok=True)
+    np.savez_compressed(path, segment=np.asarray(point_segment, np.int32))
+
+
 def write_run_files(
     folder: Path,
     *,
     info: dict[str, Any],
-    point_segment: np.ndarray,
     segments: dict[str, np.ndarray],
     timings: dict[str, Any],
     image_files: list[str],
     embeddings: np.ndarray | None = None,
 ) -> None:
-    """Write the run's tables into ``folder`` (a staging folder; crops are written by the caller)."""
+    """Write the run's tables into ``folder`` (a staging folder; crops and the point tiles,
+    :func:`write_point_tile`, are written by the caller)."""
     folder = Path(folder)
     n = len(segments["n_points"])
     for name, (_, shape) in SEGMENT_FIELDS.items():
         array = segments[name]
         if not _has_shape(array.shape, (n, *shape)):
             raise ValueError(f"segments[{name!r}] has shape {array.shape}, expected {(n, *shape)}")
-    np.savez_compressed(folder / "points.npz", segment=np.asarray(point_segment, np.int32))
     table: dict[str, Any] = {
         name: np.asarray(segments[name], dtype) for name, (dtype, _) in SEGMENT_FIELDS.items()
     }

@@ -25,7 +25,7 @@ from guardrail_core.formats.reconstruction_folder import (
 from guardrail_core.formats.run_folder import (
     CROPS_DIR,
     EMBEDDINGS_FILE,
-    POINTS_FILE,
+    POINTS_DIR,
     RUN_FILE,
     RUN_FORMAT_VERSION,
     SEGMENT_FIELDS,
@@ -34,6 +34,7 @@ from guardrail_core.formats.run_folder import (
     TIMINGS_FILE,
     Run,
     crop_name,
+    point_tile_name,
 )
 from guardrail_core.formats.run_info import RunInfo
 
@@ -76,8 +77,12 @@ class RunFolder:
         return self.root / RUN_FILE
 
     @property
-    def points_file(self) -> Path:
-        return self.root / POINTS_FILE
+    def points_dir(self) -> Path:
+        return self.root / POINTS_DIR
+
+    def point_tile_path(self, tile: int) -> Path:
+        """``points/NNNNNN.npz``: the segments of the points of the drive's tile ``tile``."""
+        return self.root / point_tile_name(int(tile))
 
     @property
     def segments_file(self) -> Path:
@@ -112,7 +117,7 @@ class RunFolder:
         """Every file and folder ``guardrail process`` writes here but ``reconstruction/``."""
         return [
             self.run_file,
-            self.points_file,
+            self.points_dir,
             self.segments_file,
             self.segments_csv,
             self.timings_file,
@@ -147,13 +152,26 @@ class RunFolder:
         :class:`~guardrail_core.errors.RunFolderError`)."""
         return RunInfo.from_json(self.read_json(), where=str(self.run_file))
 
-    def point_segment(self) -> np.ndarray:
-        """(N,) int32: the segment of every drive point (-1 road surface, -2 far from the road)."""
+    def point_segment_tile(self, tile: int) -> np.ndarray:
+        """(n,) int32: the segment of every point of the drive's tile ``tile`` (-1 road surface,
+        -2 far from the road, -3 not processed)."""
+        path = self.point_tile_path(tile)
         try:
-            with np.load(self.points_file, allow_pickle=False) as data:
+            with np.load(path, allow_pickle=False) as data:
                 return np.asarray(data["segment"])
         except (OSError, KeyError, ValueError) as exc:
-            raise RunFolderError(f"{self.points_file}: missing or damaged ({exc})") from exc
+            raise RunFolderError(f"{path}: missing or damaged ({exc})") from exc
+
+    def point_tiles(self) -> int:
+        """How many point tiles the run holds (the drive's tiles)."""
+        return int(self.read_json().get("drive", {}).get("tiles", 1))
+
+    def point_segment(self) -> np.ndarray:
+        """(N,) int32: the segment of every drive point, all tiles in order (-1 road surface,
+        -2 far from the road, -3 not processed). A survey-scale run is read tile by tile
+        instead (:meth:`point_segment_tile`)."""
+        tiles = [self.point_segment_tile(t) for t in range(self.point_tiles())]
+        return np.concatenate(tiles) if tiles else np.zeros(0, np.int32)
 
     def segments(self) -> dict[str, np.ndarray]:
         """Every ``SEGMENT_FIELDS`` array of ``segments.npz``, S rows each."""

@@ -4,14 +4,16 @@
 reconstruction's summary); :meth:`guardrail_core.formats.run_folder_paths.RunFolder.info` reads it
 back, its format version checked. :meth:`RunInfo.to_json` gives the very keys run.json has::
 
-    {"format_version": 2, "created": "...", "drive": {"path", "points"},
+    {"format_version": 3, "created": "...", "drive": {"path", "points", "tiles"},
      "model": {"version", "mode", "threshold"}, "params": {"road", "segments", "crops", "correction"},
      "counts": {...}, "images": [...], "reconstruction": {...} (optional),
-     "predicted": {"at", "previous_model"} (optional, after a model was activated in the app)}
+     "predicted": {"at", "previous_model"} (optional, after a model was activated in the app),
+     "processing": {"tile_m", "margin_m", "workers", "scheduler", "seconds", "tiles": [...]}}
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -21,17 +23,117 @@ from guardrail_core.errors import RunFolderError
 
 @dataclass(frozen=True)
 class DriveRef:
-    """The drive a run was made from: its folder (absolute, as it was then) and its points."""
+    """The drive a run was made from: its folder (absolute, as it was then), its points and
+    its point tiles (the run's ``points/`` has one file per tile)."""
 
     path: str
     points: int
+    tiles: int = 1
 
     def to_json(self) -> dict[str, Any]:
-        return {"path": self.path, "points": self.points}
+        return {"path": self.path, "points": self.points, "tiles": self.tiles}
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> DriveRef:
-        return cls(path=str(data["path"]), points=int(data["points"]))
+        return cls(
+            path=str(data["path"]), points=int(data["points"]), tiles=int(data.get("tiles", 1))
+        )
+
+
+@dataclass(frozen=True)
+class TileOutcome:
+    """What became of one processing tile.
+
+    Attributes
+    ----------
+    number : the tile's number (0, 1, ... along the drive)
+    station_m : (first, last) metres along the trajectory it owns (±inf at the drive's ends)
+    points : points it owns
+    seconds : its wall-clock seconds on its worker
+    error : None, or the named error that stopped it (``"DriveFormatError: ..."``)
+    """
+
+    number: int
+    station_m: tuple[float, float]
+    points: int
+    seconds: float
+    error: str | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "number": self.number,
+            "station_m": [_finite_or_none(v) for v in self.station_m],
+            "points": self.points,
+            "seconds": self.seconds,
+            "error": self.error,
+        }
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> TileOutcome:
+        lo, hi = data["station_m"]
+        return cls(
+            number=int(data["number"]),
+            station_m=(
+                -math.inf if lo is None else float(lo),
+                math.inf if hi is None else float(hi),
+            ),
+            points=int(data["points"]),
+            seconds=float(data["seconds"]),
+            error=None if data.get("error") is None else str(data["error"]),
+        )
+
+
+def _finite_or_none(value: float) -> float | None:
+    return None if math.isinf(value) else value
+
+
+@dataclass(frozen=True)
+class Processing:
+    """How a run was processed: tiles along the trajectory, with a margin of their neighbours.
+
+    Attributes
+    ----------
+    tile_m : metres of trajectory per processing tile (None: one tile for the whole drive)
+    margin_m : metres of the neighbours each tile sees on either side
+    workers : Dask workers (0: in this process)
+    scheduler : the Dask scheduler's address, or ``"local"`` (an embedded LocalCluster) or
+        ``"none"``
+    seconds : wall-clock seconds of the whole run
+    tiles : what became of every tile
+    """
+
+    tile_m: float | None
+    margin_m: float
+    workers: int
+    scheduler: str
+    seconds: float
+    tiles: tuple[TileOutcome, ...]
+
+    @property
+    def failed(self) -> tuple[TileOutcome, ...]:
+        return tuple(t for t in self.tiles if t.error is not None)
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "tile_m": self.tile_m,
+            "margin_m": self.margin_m,
+            "workers": self.workers,
+            "scheduler": self.scheduler,
+            "seconds": self.seconds,
+            "tiles": [t.to_json() for t in self.tiles],
+        }
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> Processing:
+        tile_m = data.get("tile_m")
+        return cls(
+            tile_m=None if tile_m is None else float(tile_m),
+            margin_m=float(data["margin_m"]),
+            workers=int(data["workers"]),
+            scheduler=str(data["scheduler"]),
+            seconds=float(data["seconds"]),
+            tiles=tuple(TileOutcome.from_json(t) for t in data["tiles"]),
+        )
 
 
 @dataclass(frozen=True)
@@ -197,6 +299,7 @@ class RunInfo:
     images : the drive's image files, in the order ``segments.npz`` ``image`` indexes them
     reconstruction : the reconstruction's summary, where one was recorded
     predicted : set when the app activated another model on the run
+    processing : the tiles it was processed in and what became of each
     """
 
     format_version: int
@@ -208,6 +311,7 @@ class RunInfo:
     images: tuple[str, ...]
     reconstruction: ReconstructionSummary | None = None
     predicted: Predicted | None = None
+    processing: Processing | None = None
 
     def to_json(self) -> dict[str, Any]:
         """The run.json document (optional members only where set)."""
@@ -224,6 +328,8 @@ class RunInfo:
             out["reconstruction"] = self.reconstruction.to_json()
         if self.predicted is not None:
             out["predicted"] = self.predicted.to_json()
+        if self.processing is not None:
+            out["processing"] = self.processing.to_json()
         return out
 
     @classmethod
@@ -239,6 +345,7 @@ class RunInfo:
         try:
             reconstruction = data.get("reconstruction")
             predicted = data.get("predicted")
+            processing = data.get("processing")
             return cls(
                 format_version=int(data["format_version"]),
                 created=str(data["created"]),
@@ -251,6 +358,7 @@ class RunInfo:
                 if reconstruction is None
                 else ReconstructionSummary.from_json(reconstruction),
                 predicted=None if predicted is None else Predicted.from_json(predicted),
+                processing=None if processing is None else Processing.from_json(processing),
             )
         except KeyError as exc:
             raise RunFolderError(f"{where}: expected a member {exc.args[0]!r}, found none") from exc

@@ -97,9 +97,18 @@ def scanner_params(fields: Mapping, first_gps_time: float, where: str = "scanner
 
 def scan_lattice(
     scanner: ScannerParams, gps_time: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, float]:
-    """Rotation (N,), phase (N,) and the share of points off the pulse grid."""
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """Rotation (N,) int64, phase (N,) int64 and the number of points off the pulse grid, of
+    points at GPS times (N,) s; called chunk by chunk, so the counts add up over a delivery.
+
+    Raises
+    ------
+    InvalidOptionError
+        The epoch ``t0`` lies after a point, or more than 2^32 rotations before one.
+    """
     rotation, phase = scanner.lattice_from_gps_time(gps_time)
+    if len(gps_time) == 0:
+        return rotation, phase, 0
     if rotation.min() < 0 or rotation.max() >= 2**32:
         raise InvalidOptionError(
             f"scanner t0 {scanner.t0_s:.6f} s gives rotations {int(rotation.min())}.."
@@ -107,5 +116,5 @@ def scan_lattice(
             f"({float(gps_time.min()):.6f} s) and within 2^32 rotations of the last"
         )
     pulses = (gps_time - scanner.t0_s) * scanner.measurement_rate_hz
-    off_grid = float(np.mean(np.abs(pulses - np.rint(pulses)) > OFF_GRID_TOLERANCE))
+    off_grid = int(np.count_nonzero(np.abs(pulses - np.rint(pulses)) > OFF_GRID_TOLERANCE))
     return rotation, phase, off_grid

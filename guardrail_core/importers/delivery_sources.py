@@ -2,6 +2,10 @@
 with their times brought to the drive's seconds of the GPS week and their coordinates to a local
 origin. The formats are documented in ``docs/import.md``; every reader names the file and line
 of what is wrong (:class:`~guardrail_core.errors.ImportSourceError` subclasses).
+
+A delivery's points are never read whole: :func:`scan_delivery` reads each file's header and its
+first and last point, and :func:`read_time_ordered` streams the points of all files in GPS-time
+order, chunk by chunk (laspy's chunked reading).
 """
 
 from __future__ import annotations
@@ -10,7 +14,7 @@ import csv
 import math
 import os
 import re
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -21,6 +25,7 @@ from laspy.vlrs.known import GeoKeyDirectoryVlr, WktCoordinateSystemVlr
 from guardrail_core.errors import (
     ImportSourceError,
     MissingGpsTimeError,
+    PointsOutOfTimeOrderError,
     SourceFormatError,
     TrajectoryCoverageError,
 )
@@ -170,15 +175,18 @@ def read_image_list(path: PathLike) -> list[SourceImage]:
 
 # ---------------------------------------------------------------------------------- LAS files
 
+#: What laspy and lazrs raise on a file that is not LAS/LAZ or is cut short (lazrs: RuntimeError).
+_LAS_ERRORS = (laspy.errors.LaspyException, OSError, ValueError, RuntimeError)
 
-def las_crs(las: laspy.LasData) -> str | None:
-    """The CRS a LAS file declares, as a string, without pyproj.
+
+def las_crs(header: laspy.LasHeader) -> str | None:
+    """The CRS a LAS header declares, as a string, without pyproj.
 
     An OGC WKT record (LAS 1.4) gives ``EPSG:<code>`` when its outermost element ends in an EPSG
     authority, else the WKT itself; GeoTIFF keys give ``EPSG:<projected or geographic code>``,
     ``+<vertical code>`` when a vertical CRS is named too. ``None`` when the file has neither.
     """
-    records = list(las.header.vlrs) + list(getattr(las.header, "evlrs", None) or [])
+    records = list(header.vlrs) + list(getattr(header, "evlrs", None) or [])
     for record in records:
         if isinstance(record, WktCoordinateSystemVlr) and record.string.strip("\0 \n"):
             wkt = " ".join(record.string.strip("\0").split())
@@ -202,119 +210,366 @@ def las_crs(las: laspy.LasData) -> str | None:
 
 
 @dataclass(frozen=True)
-class DeliveryPoints:
-    xyz: np.ndarray  # (N, 3) float64 map coordinates
-    gps_time: np.ndarray  # (N,) float64
-    intensity: np.ndarray  # (N,) uint16
+class DeliveryFile:
+    """One LAS/LAZ file of a delivery, as its header and its first and last points describe it.
+
+    Attributes
+    ----------
+    path : the file
+    given : its position among the files as given (orders files that start at the same time)
+    points : int, point count from the header
+    bounds_min, bounds_max : (3,) float64 map coordinates from the header
+    first_time, last_time : float, GPS s (as recorded) of its first and last point; the bounds of
+        all its times once :func:`read_time_ordered` has checked that they do not decrease
+    crs : the CRS it declares (:func:`las_crs`), or None
+    standard_time : its header declares (adjusted) standard GPS time
+    """
+
+    path: Path
+    given: int
+    points: int
+    bounds_min: np.ndarray
+    bounds_max: np.ndarray
+    first_time: float
+    last_time: float
     crs: str | None
-    standard_time: bool  # a header declared (adjusted) standard GPS time
+    standard_time: bool
 
 
-def read_delivery_points(paths: Sequence[PathLike]) -> DeliveryPoints:
-    """Read and concatenate LAS/LAZ files (any point format with ``gps_time``).
+#: Why a file out of time order is refused, and what to do.
+_SORT_ADVICE = (
+    "the importer streams each file in the order its points are stored, which must be GPS-time "
+    "order (as a mobile-mapping system records them): sort the file by time first (e.g. "
+    "LAStools' lassort -gps_time)"
+)
+
+
+def _point_time(reader: laspy.LasReader, index: int) -> float:
+    reader.seek(index)
+    return float(reader.read_points(1).gps_time[0])
+
+
+def scan_delivery_file(path: PathLike, given: int = 0) -> DeliveryFile:
+    """Describe a delivery's LAS/LAZ file from its header and its first and last points, without
+    reading the others (a seek, also in LAZ through its chunk table).
 
     Raises
     ------
     MissingSourceFileError, SourceFormatError
-        A file is missing, is not LAS, has no points, non-finite times, or files name different
-        CRSs.
+        The file is missing, is not LAS/LAZ, or its first or last time is not finite.
     MissingGpsTimeError
-        A file's point format has no ``gps_time``.
+        Its point format has no ``gps_time``, or the time is zero at its first and last point.
+    PointsOutOfTimeOrderError
+        Its last point is earlier than its first.
     """
-    xyz, times, intensity, crss, standard = [], [], [], {}, False
-    for name in paths:
-        path = require_file(name, "point cloud")
-        try:
-            las = laspy.read(str(path))
-        except (laspy.errors.LaspyException, OSError, ValueError) as exc:
-            raise SourceFormatError(f"{path}: not a readable LAS/LAZ file ({exc})") from exc
-        dimensions = set(las.point_format.dimension_names)
-        if "gps_time" not in dimensions:
-            raise MissingGpsTimeError(
-                f"{path}: LAS point format {las.point_format.id} has no gps_time, so its points "
-                "cannot be placed on the trajectory or the scan lattice; export the cloud with a "
-                "point format that has it (1, 3-10)"
+    path = require_file(path, "point cloud")
+    try:
+        with laspy.open(str(path)) as reader:
+            header = reader.header
+            has_time = "gps_time" in header.point_format.dimension_names
+            count = int(header.point_count)
+            times = (
+                (_point_time(reader, 0), _point_time(reader, count - 1))
+                if has_time and count
+                else (0.0, 0.0)
             )
-        gps_time = np.asarray(las.gps_time, np.float64)
-        if not np.all(np.isfinite(gps_time)):
-            raise SourceFormatError(
-                f"{path}: {int((~np.isfinite(gps_time)).sum())} points have a non-finite gps_time"
-            )
-        if len(gps_time) and not np.any(gps_time):
-            raise MissingGpsTimeError(f"{path}: gps_time is zero on every point (never filled in)")
-        xyz.append(np.column_stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)]))
-        times.append(gps_time)
-        intensity.append(
-            np.asarray(las.intensity, np.uint16)
-            if "intensity" in dimensions
-            else np.zeros(len(gps_time), np.uint16)
+    except _LAS_ERRORS as exc:
+        raise SourceFormatError(f"{path}: not a readable LAS/LAZ file ({exc})") from exc
+    if not has_time:
+        raise MissingGpsTimeError(
+            f"{path}: LAS point format {header.point_format.id} has no gps_time, so its points "
+            "cannot be placed on the trajectory or the scan lattice; export the cloud with a "
+            "point format that has it (1, 3-10)"
         )
-        crs = las_crs(las)
-        if crs is not None:
-            crss[str(path)] = crs
-        standard |= bool(
-            las.header.global_encoding.gps_time_type == laspy.header.GpsTimeType.STANDARD
+    if not all(math.isfinite(t) for t in times):
+        raise SourceFormatError(f"{path}: its first or last point has a non-finite gps_time")
+    if count and times == (0.0, 0.0):
+        raise MissingGpsTimeError(
+            f"{path}: gps_time is zero at its first and its last point (never filled in)"
         )
-    points = DeliveryPoints(
-        np.concatenate(xyz).astype(np.float64, copy=False),
-        np.concatenate(times),
-        np.concatenate(intensity),
-        next(iter(crss.values()), None),
-        standard,
+    if times[1] < times[0]:
+        raise PointsOutOfTimeOrderError(
+            f"{path}: its last point (GPS time {times[1]:.6f} s) is earlier than its first "
+            f"({times[0]:.6f} s); {_SORT_ADVICE}"
+        )
+    return DeliveryFile(
+        path=path,
+        given=given,
+        points=count,
+        bounds_min=np.asarray(header.mins, np.float64),
+        bounds_max=np.asarray(header.maxs, np.float64),
+        first_time=times[0],
+        last_time=times[1],
+        crs=las_crs(header),
+        standard_time=header.global_encoding.gps_time_type == laspy.header.GpsTimeType.STANDARD,
     )
-    if len(points.gps_time) == 0:
+
+
+def scan_delivery(paths: Sequence[PathLike]) -> list[DeliveryFile]:
+    """:func:`scan_delivery_file` of every file, in the order given.
+
+    Raises
+    ------
+    MissingSourceFileError, SourceFormatError, MissingGpsTimeError
+        As :func:`scan_delivery_file`; also when the files hold no point at all or declare
+        different CRSs.
+    """
+    files = [scan_delivery_file(path, given) for given, path in enumerate(paths)]
+    if sum(f.points for f in files) == 0:
         raise SourceFormatError(f"{', '.join(str(p) for p in paths)}: no points")
+    crss = {str(f.path): f.crs for f in files if f.crs is not None}
     if len(set(crss.values())) > 1:
         raise SourceFormatError(
             "the point clouds declare different CRSs: "
             + "; ".join(f"{path}: {crs}" for path, crs in crss.items())
         )
-    return points
+    return files
 
 
-def to_week_seconds(
-    gps_time: np.ndarray, span: tuple[float, float], standard_declared: bool
-) -> tuple[np.ndarray, str | None]:
-    """Point times in the trajectory's time system (N,) float64, and a note if they were converted.
+@dataclass(frozen=True)
+class DeliveryChunk:
+    """Points of a delivery ordered by GPS time.
 
-    The drive format counts GPS seconds of the week. Many LAS 1.4 files carry (adjusted) standard
-    GPS time instead. When the trajectory is in seconds of the week and the points' times cannot
-    be, they are reduced modulo a week: adjusted standard time (below 1e9 s) first gets its 1e9 s
-    back. A delivery across the week's end (Sunday 00:00 GPS) cannot be converted this way.
+    Attributes
+    ----------
+    xyz : (N, 3) float64 map coordinates, metres
+    gps_time : (N,) float64 seconds, as recorded
+    intensity : (N,) uint16
     """
-    inside = gps_time.min() >= span[0] and gps_time.max() <= span[1]
-    if inside or gps_time.min() < GPS_WEEK_S or span[1] > GPS_WEEK_S:
-        return gps_time, None
-    # Added before the modulo so the sum stays near 4e8 s, where float64 resolves 60 ns.
-    adjusted = gps_time < 1e9
-    week = np.mod(gps_time + np.where(adjusted, ADJUSTED_STANDARD_WEEK_OFFSET_S, 0.0), GPS_WEEK_S)
-    kind = "adjusted standard" if adjusted.all() else "standard"
-    declared = "" if standard_declared else " (the LAS header says week time, its values do not)"
-    return week, f"point times converted from {kind} GPS time to seconds of the week{declared}"
 
+    xyz: np.ndarray
+    gps_time: np.ndarray
+    intensity: np.ndarray
 
-def check_coverage(times: np.ndarray, trajectory: np.ndarray, what: str, where: str) -> None:
-    t_lo, t_hi = float(trajectory[0, 0]), float(trajectory[-1, 0])
-    lo, hi = float(times.min()), float(times.max())
-    if lo < t_lo or hi > t_hi:
-        outside = int(((times < t_lo) | (times > t_hi)).sum())
-        raise TrajectoryCoverageError(
-            f"{where}: {what} span GPS time {lo:.6f}..{hi:.6f} s but the trajectory covers only "
-            f"{t_lo:.6f}..{t_hi:.6f} s ({outside:,} of {len(times):,} {what} outside); a "
-            "trajectory must cover every point and image"
+    def __len__(self) -> int:
+        return len(self.gps_time)
+
+    def split(self, cut: int) -> tuple[DeliveryChunk, DeliveryChunk]:
+        """The first ``cut`` points and the rest."""
+        head = DeliveryChunk(self.xyz[:cut], self.gps_time[:cut], self.intensity[:cut])
+        tail = DeliveryChunk(self.xyz[cut:], self.gps_time[cut:], self.intensity[cut:])
+        return head, tail
+
+    @staticmethod
+    def join(chunks: Sequence[DeliveryChunk]) -> DeliveryChunk:
+        """The chunks' points one after the other (``chunks`` not empty)."""
+        if len(chunks) == 1:
+            return chunks[0]
+        return DeliveryChunk(
+            np.concatenate([c.xyz for c in chunks]),
+            np.concatenate([c.gps_time for c in chunks]),
+            np.concatenate([c.intensity for c in chunks]),
         )
 
 
-def drive_origin(xyz: np.ndarray) -> np.ndarray:
-    """The local origin (3,) float64 for map points (N, 3): the bounding-box centre, x and y
-    rounded to :data:`ORIGIN_ROUNDING_M`, z to 1 m, so local coordinates are small and round."""
-    centre = (xyz.min(axis=0) + xyz.max(axis=0)) / 2
+_NO_POINTS = DeliveryChunk(np.zeros((0, 3)), np.zeros(0), np.zeros(0, np.uint16))
+
+
+def _check_time_order(path: Path, gps_time: np.ndarray, previous: float, start: int) -> None:
+    """Raise unless ``gps_time`` (the points from number ``start`` on) follows ``previous`` and
+    never decreases."""
+    times = np.concatenate([[previous], gps_time])
+    back = np.flatnonzero(np.diff(times) < 0)
+    if back.size:
+        i = int(back[0])
+        raise PointsOutOfTimeOrderError(
+            f"{path}: point {start + i:,} (GPS time {times[i + 1]:.6f} s) comes after a point at "
+            f"{times[i]:.6f} s; {_SORT_ADVICE}"
+        )
+
+
+def read_file_chunks(file: DeliveryFile, chunk_points: int) -> Iterator[DeliveryChunk]:
+    """The points of ``file`` in chunks of ``chunk_points`` (laspy's chunked reading): only one
+    chunk is in memory at a time.
+
+    Raises
+    ------
+    SourceFormatError
+        A chunk cannot be read or holds a non-finite time.
+    PointsOutOfTimeOrderError
+        A point's time is earlier than the time of the point before it.
+    """
+    with laspy.open(str(file.path)) as reader:
+        chunks = reader.chunk_iterator(chunk_points)
+        start, previous = 0, -math.inf
+        while True:
+            try:
+                points = next(chunks)
+            except StopIteration:
+                return
+            except _LAS_ERRORS as exc:
+                raise SourceFormatError(
+                    f"{file.path}: the points from number {start:,} on cannot be read ({exc})"
+                ) from exc
+            if len(points) == 0:
+                return
+            gps_time = np.asarray(points.gps_time, np.float64)
+            if not np.all(np.isfinite(gps_time)):
+                raise SourceFormatError(
+                    f"{file.path}: {int((~np.isfinite(gps_time)).sum())} points from number "
+                    f"{start:,} on have a non-finite gps_time"
+                )
+            _check_time_order(file.path, gps_time, previous, start)
+            names = points.point_format.dimension_names
+            yield DeliveryChunk(
+                np.column_stack([np.asarray(points.x), np.asarray(points.y), np.asarray(points.z)]),
+                gps_time,
+                np.asarray(points.intensity, np.uint16)
+                if "intensity" in names
+                else np.zeros(len(gps_time), np.uint16),
+            )
+            start, previous = start + len(gps_time), float(gps_time[-1])
+
+
+class _FileStream:
+    """One file being merged: its chunks, and the points read from it but not yet passed on."""
+
+    def __init__(self, file: DeliveryFile, chunk_points: int) -> None:
+        self.file = file
+        self._chunks = read_file_chunks(file, chunk_points)
+        self.pending = _NO_POINTS
+        self.done = False
+
+    def read_until_two_times(self) -> None:
+        """Read on until the pending points span two distinct times (or the file ends), so that
+        those before the last time can be passed on."""
+        while not self.done and (
+            len(self.pending) == 0 or self.pending.gps_time[0] == self.pending.gps_time[-1]
+        ):
+            chunk = next(self._chunks, None)
+            if chunk is None:
+                self.done = True
+            else:
+                self.pending = DeliveryChunk.join([p for p in (self.pending, chunk) if len(p)])
+
+    @property
+    def horizon(self) -> float:
+        """Every point this file has yet to give lies at this time or later."""
+        return math.inf if self.done else float(self.pending.gps_time[-1])
+
+    def take_before(self, limit: float) -> DeliveryChunk:
+        head, self.pending = self.pending.split(
+            int(np.searchsorted(self.pending.gps_time, limit, side="left"))
+        )
+        return head
+
+
+def read_time_ordered(files: Sequence[DeliveryFile], chunk_points: int) -> Iterator[DeliveryChunk]:
+    """All points of the delivery ``files`` in GPS-time order, chunk by chunk, whatever the order
+    the files come in.
+
+    Each file must list its points in time order; files may overlap in time (spatial tiles of one
+    pass, one file per scanner). Files are merged like sorted runs: a file is opened when the
+    merge reaches its first time, and every open file holds about one chunk of pending points,
+    so memory is ``chunk_points`` times the number of files that overlap in time, never the whole
+    delivery. Points at equal times keep the order of their files (by first time, then as given)
+    and their order within a file.
+
+    Raises
+    ------
+    SourceFormatError, PointsOutOfTimeOrderError
+        As :func:`read_file_chunks`.
+    """
+    waiting = sorted((f for f in files if f.points), key=lambda f: (f.first_time, f.given))
+    open_streams: list[_FileStream] = []
+    while waiting or open_streams:
+        for stream in open_streams:
+            stream.read_until_two_times()
+        open_streams = [s for s in open_streams if len(s.pending)]
+        horizon = min((s.horizon for s in open_streams), default=math.inf)
+        if waiting and waiting[0].first_time <= horizon:  # it may hold points before the horizon
+            open_streams.append(_FileStream(waiting.pop(0), chunk_points))
+            open_streams.sort(key=lambda s: (s.file.first_time, s.file.given))
+            continue
+        # Every point before the horizon has been read: pass those on, in time order.
+        parts = [s.take_before(horizon) for s in open_streams]
+        parts = [p for p in parts if len(p)]
+        if not parts:  # cannot happen: the file that sets the horizon has a point before it
+            continue
+        merged = DeliveryChunk.join(parts)
+        if len(parts) > 1:
+            order = np.argsort(merged.gps_time, kind="stable")
+            merged = DeliveryChunk(
+                merged.xyz[order], merged.gps_time[order], merged.intensity[order]
+            )
+        yield merged
+
+
+def week_time_note(
+    point_span: tuple[float, float], span: tuple[float, float], standard_declared: bool
+) -> str | None:
+    """Whether the points' times (first, last GPS s as recorded) need :func:`to_week_seconds` to
+    fit the trajectory's ``span``: the note that says they were converted, or None.
+
+    The drive format counts GPS seconds of the week. Many LAS 1.4 files carry (adjusted) standard
+    GPS time instead. When the trajectory is in seconds of the week and the points' times cannot
+    be, they are reduced modulo a week (:func:`to_week_seconds`). A delivery across the week's
+    end (Sunday 00:00 GPS) cannot be converted this way.
+    """
+    lo, hi = point_span
+    inside = lo >= span[0] and hi <= span[1]
+    if inside or lo < GPS_WEEK_S or span[1] > GPS_WEEK_S:
+        return None
+    kind = "adjusted standard" if hi < 1e9 else "standard"
+    declared = "" if standard_declared else " (the LAS header says week time, its values do not)"
+    return f"point times converted from {kind} GPS time to seconds of the week{declared}"
+
+
+def to_week_seconds(gps_time: np.ndarray) -> np.ndarray:
+    """(Adjusted) standard GPS times (N,) s as seconds of the GPS week (N,) float64: adjusted
+    standard time (below 1e9 s) first gets its 1e9 s back."""
+    # Added before the modulo so the sum stays near 4e8 s, where float64 resolves 60 ns.
+    adjusted = gps_time < 1e9
+    return np.mod(gps_time + np.where(adjusted, ADJUSTED_STANDARD_WEEK_OFFSET_S, 0.0), GPS_WEEK_S)
+
+
+def check_span(lo: float, hi: float, trajectory: np.ndarray, what: str, where: str) -> None:
+    """Raise unless GPS times ``lo``..``hi`` lie within the trajectory's (N, 7) time span."""
+    t_lo, t_hi = float(trajectory[0, 0]), float(trajectory[-1, 0])
+    if lo < t_lo or hi > t_hi:
+        raise TrajectoryCoverageError(
+            f"{where}: {what} span GPS time {lo:.6f}..{hi:.6f} s but the trajectory covers only "
+            f"{t_lo:.6f}..{t_hi:.6f} s; a trajectory must cover every point and image"
+        )
+
+
+def check_coverage(times: np.ndarray, trajectory: np.ndarray, what: str, where: str) -> None:
+    """Raise unless every time (N,) GPS s lies within the trajectory's (N, 7) time span; the
+    error counts those outside."""
+    t_lo, t_hi = float(trajectory[0, 0]), float(trajectory[-1, 0])
+    outside = int(((times < t_lo) | (times > t_hi)).sum())
+    if outside:
+        try:
+            check_span(float(times.min()), float(times.max()), trajectory, what, where)
+        except TrajectoryCoverageError as exc:
+            raise TrajectoryCoverageError(
+                f"{exc} ({outside:,} of {len(times):,} {what} outside)"
+            ) from None
+
+
+def drive_origin(bounds_min: np.ndarray, bounds_max: np.ndarray) -> np.ndarray:
+    """The local origin (3,) float64 for map points within ``bounds_min``..``bounds_max`` (3,):
+    the bounding-box centre, x and y rounded to :data:`ORIGIN_ROUNDING_M`, z to 1 m, so local
+    coordinates are small and round.
+
+    Raises
+    ------
+    ImportSourceError
+        The box reaches further from the origin than a drive's LAS tiles can hold.
+    """
+    lo, hi = np.asarray(bounds_min, np.float64), np.asarray(bounds_max, np.float64)
+    centre = (lo + hi) / 2
     origin = np.round(centre / ORIGIN_ROUNDING_M) * ORIGIN_ROUNDING_M
     origin[2] = np.round(centre[2])
-    reach = float(np.abs(xyz - origin).max())
+    check_reach(np.stack([lo, hi]), origin)
+    return origin
+
+
+def check_reach(xyz: np.ndarray, origin: np.ndarray) -> None:
+    """Raise unless map points (N, 3) lie within :data:`MAX_EXTENT_M` of ``origin`` (3,)."""
+    reach = float(np.abs(xyz - origin).max(initial=0.0))
     if reach > MAX_EXTENT_M:
         raise ImportSourceError(
             f"points reach {reach / 1000:.0f} km from the drive origin; a drive's LAS file holds "
             f"at most {MAX_EXTENT_M / 1000:.0f} km either way: split the delivery"
         )
-    return origin

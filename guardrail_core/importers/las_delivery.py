@@ -14,6 +14,12 @@ fit together (every time covered by the trajectory, every camera calibrated, the
 those of their calibration), then writes an ordinary drive folder through a staging folder
 (:func:`guardrail_core.formats.atomic.staged_folder`), so a failure leaves nothing behind and no
 input is ever deleted. The formats are documented in ``docs/import.md``.
+
+The points stream: the files' headers and first and last points give the origin, the time span
+and the scanner's epoch before any point is written; then the points of all files pass in
+GPS-time order, chunk by chunk, through the lattice into a
+:class:`~guardrail_core.formats.drive_tiles.TiledPointWriter` (drive format 2.0 tiles). Memory
+is one tile plus a chunk per file open at once, whatever the size of the delivery.
 """
 
 from __future__ import annotations
@@ -34,7 +40,8 @@ from guardrail_core.errors import (
     SourceFormatError,
 )
 from guardrail_core.formats.atomic import check_output, staged_folder
-from guardrail_core.formats.drive import ImageRecord, PointCloud, write_drive_files
+from guardrail_core.formats.drive import ImageRecord, write_drive_metadata
+from guardrail_core.formats.drive_tiles import TiledPointWriter
 from guardrail_core.geom.frames import make_transform
 from guardrail_core.importers.calibration import read_calibrations, require_file
 from guardrail_core.importers.delivery_scanner import (
@@ -44,36 +51,48 @@ from guardrail_core.importers.delivery_scanner import (
     scanner_params,
 )
 from guardrail_core.importers.delivery_sources import (
+    DeliveryFile,
     PathLike,
     SourceImage,
     check_coverage,
+    check_reach,
+    check_span,
     drive_origin,
     las_crs,
-    read_delivery_points,
     read_image_list,
+    read_time_ordered,
     read_trajectory_table,
+    scan_delivery,
     to_week_seconds,
+    week_time_note,
 )
 from guardrail_core.sensors.camera import Camera
 from guardrail_core.sensors.scanner import ScannerParams
 from guardrail_core.sensors.trajectory import Trajectory
 
 __all__ = [
+    "DEFAULT_CHUNK_POINTS",
     "DEFAULT_REFERENCE_HEIGHT_M",
+    "DEFAULT_TILE_M",
     "LasImport",
     "drive_origin",
     "import_las_delivery",
     "las_crs",
-    "read_delivery_points",
     "read_image_list",
     "read_scanner_file",
+    "read_time_ordered",
     "read_trajectory_table",
+    "scan_delivery",
     "scanner_params",
     "to_week_seconds",
 ]
 
 #: Height of the trajectory's reference point above the road, as the simulator's vehicle has it.
 DEFAULT_REFERENCE_HEIGHT_M = 1.8
+#: Metres of driving per tile of the imported drive.
+DEFAULT_TILE_M = 100.0
+#: Points read from a LAS/LAZ file at a time: about 40 MB of arrays in flight per chunk.
+DEFAULT_CHUNK_POINTS = 250_000
 
 
 @dataclass(frozen=True)
@@ -83,7 +102,7 @@ class LasImport:
     Attributes
     ----------
     out : the drive folder
-    n_points, n_images : int
+    n_points, n_images, n_tiles : int
     cameras : names of the calibrated cameras
     crs : str, as written to ``drive.json``; ``crs_from`` says where it came from
         (``"LAS file"``, ``"--crs option"`` or ``"none"``)
@@ -96,6 +115,7 @@ class LasImport:
     out: Path
     n_points: int
     n_images: int
+    n_tiles: int
     cameras: list[str]
     crs: str
     crs_from: str
@@ -159,6 +179,58 @@ def _image_records(
     return records
 
 
+# ------------------------------------------------------------------------------------ points
+
+
+@dataclass(frozen=True)
+class _Streamed:
+    points: int
+    off_grid: int
+    tiles: int
+
+
+def _stream_points(
+    folder: Path,
+    files: list[DeliveryFile],
+    *,
+    origin: np.ndarray,
+    trajectory: Trajectory,
+    table: np.ndarray,
+    scanner: ScannerParams,
+    week_time: bool,
+    tile_m: float | None,
+    compress: bool,
+    chunk_points: int,
+    progress: bool,
+) -> _Streamed:
+    """Write the points of ``files`` as tiles into ``folder``, chunk by chunk in GPS-time order:
+    times to seconds of the week (``week_time``), coordinates to the local frame, the lattice
+    from the times (§3.1). Each chunk is checked as the whole delivery was before: covered by the
+    trajectory, within reach of the origin, on a lattice the epoch allows."""
+    where = ", ".join(str(f.path) for f in files)
+    writer = TiledPointWriter(
+        folder, origin=origin, trajectory=trajectory, tile_m=tile_m, compress=compress
+    )
+    written = off_grid = 0
+    with tqdm(
+        total=sum(f.points for f in files),
+        desc="importing points",
+        unit="pt",
+        unit_scale=True,
+        disable=not progress,
+        leave=False,
+    ) as bar:
+        for chunk in read_time_ordered(files, chunk_points):
+            gps_time = to_week_seconds(chunk.gps_time) if week_time else chunk.gps_time
+            check_coverage(gps_time, table, "points", where)
+            check_reach(chunk.xyz, origin)
+            rotation, phase, off = scan_lattice(scanner, gps_time)
+            writer.append(chunk.xyz - origin, gps_time, chunk.intensity, rotation, phase)
+            written, off_grid = written + len(chunk), off_grid + off
+            bar.update(len(chunk))
+    return _Streamed(written, off_grid, len(writer.close()))
+
+
 def import_las_delivery(
     points: PathLike | Sequence[PathLike],
     trajectory: PathLike,
@@ -170,15 +242,18 @@ def import_las_delivery(
     crs: str | None = None,
     reference_height_m: float = DEFAULT_REFERENCE_HEIGHT_M,
     trajectory_degrees: bool = False,
+    tile_m: float | None = DEFAULT_TILE_M,
+    chunk_points: int = DEFAULT_CHUNK_POINTS,
     compress: bool = True,
     overwrite: bool = False,
     progress: bool = False,
 ) -> LasImport:
-    """Import a LAS/LAZ delivery into the drive folder ``out``.
+    """Import a LAS/LAZ delivery into the drive folder ``out``, streaming its points.
 
     Parameters
     ----------
-    points : one LAS/LAZ file or several (concatenated), any point format with ``gps_time``
+    points : one LAS/LAZ file or several, in any order, any point format with ``gps_time``; each
+        file lists its points in GPS-time order; files may overlap in time (they are merged)
     trajectory : CSV with a header naming time, x, y, z, roll, pitch, yaw (any order); GPS s, map
         coordinates (metres), radians (degrees with ``trajectory_degrees``)
     out : drive folder to write; must be absent or empty unless ``overwrite``
@@ -189,8 +264,10 @@ def import_las_delivery(
     crs : the map CRS; overrides the one the LAS file declares. Default: the file's, else
         ``"unknown"``
     reference_height_m : metres of the trajectory's reference point above the road
-    compress : write ``points.laz`` (True) or ``points.las``
-    progress : show a progress bar while copying images
+    tile_m : metres of driving per tile of the drive's points; None: one tile
+    chunk_points : points read from a file at a time (memory, not the result, depends on it)
+    compress : write LAZ tiles (True) or LAS
+    progress : show progress bars while copying images and importing points
 
     Returns
     -------
@@ -199,11 +276,12 @@ def import_las_delivery(
 
     Raises
     ------
-    MissingSourceFileError, SourceFormatError, MissingGpsTimeError, TrajectoryCoverageError,
-    MissingCalibrationError, ImportSourceError
+    MissingSourceFileError, SourceFormatError, MissingGpsTimeError, PointsOutOfTimeOrderError,
+    TrajectoryCoverageError, MissingCalibrationError, ImportSourceError
         Each names the input file and what is wrong; nothing is written.
     InvalidOptionError
-        Scanner rates missing, or an epoch ``t0`` after the first point.
+        Scanner rates missing, an epoch ``t0`` after the first point, a tile length or chunk size
+        not positive.
     OutputExistsError
         ``out`` is not empty and ``overwrite`` is False.
     InputInsideOutputError
@@ -216,6 +294,10 @@ def import_las_delivery(
     )
     if not point_paths:
         raise InvalidOptionError("no point cloud given")
+    if tile_m is not None and not tile_m > 0:
+        raise InvalidOptionError(f"tiles must be longer than 0 m, got {tile_m}")
+    if not chunk_points >= 1:
+        raise InvalidOptionError(f"chunks must hold at least 1 point, got {chunk_points}")
     calibration_paths = (
         []
         if calibration is None
@@ -258,39 +340,41 @@ def import_las_delivery(
             np.array([i.gps_time for i in source_images]), table, "images", str(images_csv)
         )
 
-    cloud = read_delivery_points(point_paths)
-    gps_time, converted = to_week_seconds(
-        cloud.gps_time, (float(table[0, 0]), float(table[-1, 0])), cloud.standard_time
+    # The points' headers and first and last points: their span, origin and CRS.
+    files = scan_delivery(point_paths)
+    with_points = [f for f in files if f.points]
+    recorded = (min(f.first_time for f in with_points), max(f.last_time for f in with_points))
+    converted = week_time_note(
+        recorded, (float(table[0, 0]), float(table[-1, 0])), any(f.standard_time for f in files)
     )
     if converted:
         notes.append(converted)
-    check_coverage(gps_time, table, "points", ", ".join(str(p) for p in point_paths))
-    order = np.argsort(gps_time, kind="stable")  # the drive's points are ordered by GPS time
-    gps_time = gps_time[order]
-    origin = drive_origin(cloud.xyz)
+    first, last = (
+        float(t) for t in (to_week_seconds(np.array(recorded)) if converted else recorded)
+    )
+    check_span(first, last, table, "points", ", ".join(str(p) for p in point_paths))
+    origin = drive_origin(
+        np.min([f.bounds_min for f in with_points], axis=0),
+        np.max([f.bounds_max for f in with_points], axis=0),
+    )
 
     if scanner_fields is not None:
-        params = scanner_params(scanner_fields, float(gps_time[0]), scanner_where)
+        params = scanner_params(scanner_fields, first, scanner_where)
     elif isinstance(scanner, ScannerParams):
         params = scanner
     else:
         raise InvalidOptionError(
             f"scanner: expected ScannerParams, a mapping or a file, got {scanner!r}"
         )
-    rotation, phase, off_grid = scan_lattice(params, gps_time)
-    if off_grid > OFF_GRID_NOTE_FRACTION:
-        notes.append(
-            f"{100 * off_grid:.0f}% of the points' times lie off the scanner's pulse grid "
-            f"({params.measurement_rate_hz:g} Hz from t0 {params.t0_s:.6f} s): check the "
-            "scanner's rates and epoch, or the lattice joins points that are not neighbours"
-        )
+    scan_lattice(params, np.array([first, last]))  # a wrong epoch fails before any writing
 
+    declared = next((f.crs for f in files if f.crs is not None), None)
     if crs is not None:
         crs_from = "--crs option"
-        if cloud.crs is not None and cloud.crs != crs:
-            notes.append(f"--crs {crs} replaces the CRS the LAS file declares ({cloud.crs})")
-    elif cloud.crs is not None:
-        crs, crs_from = cloud.crs, "LAS file"
+        if declared is not None and declared != crs:
+            notes.append(f"--crs {crs} replaces the CRS the LAS file declares ({declared})")
+    elif declared is not None:
+        crs, crs_from = declared, "LAS file"
     else:
         crs, crs_from = "unknown", "none"
         notes.append("the LAS file declares no CRS and --crs was not given: CRS 'unknown'")
@@ -302,23 +386,6 @@ def import_las_delivery(
         reference_height_m=float(reference_height_m),
     )
     images = _image_records(source_images, cameras, local_trajectory, Path(images_csv or "images"))
-    point_cloud = PointCloud(
-        xyz=cloud.xyz[order] - origin,
-        gps_time=gps_time,
-        intensity=cloud.intensity[order],
-        rotation=rotation,
-        phase=phase,
-    )
-    source = {
-        "importer": "las",
-        "points": [str(p.resolve()) for p in point_paths],
-        "trajectory": str(trajectory_path.resolve()),
-        "images": str(Path(images_csv).resolve()) if images_csv is not None else None,
-        "calibration": [str(p.resolve()) for p in calibration_paths],
-        "crs_from": crs_from,
-        "gps_time": converted or "as recorded",
-        "lattice_off_grid_fraction": off_grid,
-    }
 
     with staged_folder(out, overwrite=overwrite, inputs=inputs) as staging:
         for source_path, record in tqdm(
@@ -326,23 +393,53 @@ def import_las_delivery(
         ):
             (staging / record.file).parent.mkdir(parents=True, exist_ok=True)
             shutil.copyfile(source_path, staging / record.file)
-        write_drive_files(
+        streamed = _stream_points(
+            staging,
+            files,
+            origin=origin,
+            trajectory=local_trajectory,
+            table=table,
+            scanner=params,
+            week_time=converted is not None,
+            tile_m=tile_m,
+            compress=compress,
+            chunk_points=chunk_points,
+            progress=progress,
+        )
+        off_grid = streamed.off_grid / streamed.points
+        if off_grid > OFF_GRID_NOTE_FRACTION:
+            notes.append(
+                f"{100 * off_grid:.0f}% of the points' times lie off the scanner's pulse grid "
+                f"({params.measurement_rate_hz:g} Hz from t0 {params.t0_s:.6f} s): check the "
+                "scanner's rates and epoch, or the lattice joins points that are not neighbours"
+            )
+        source = {
+            "importer": "las",
+            "points": [str(p.resolve()) for p in point_paths],
+            "trajectory": str(trajectory_path.resolve()),
+            "images": str(Path(images_csv).resolve()) if images_csv is not None else None,
+            "calibration": [str(p.resolve()) for p in calibration_paths],
+            "crs_from": crs_from,
+            "gps_time": converted or "as recorded",
+            "lattice_off_grid_fraction": off_grid,
+            "tile_m": tile_m,
+        }
+        write_drive_metadata(
             staging,
             crs=crs,
             origin=origin,
             scanner=params,
             trajectory=local_trajectory,
-            points=point_cloud,
             cameras=list(cameras.values()),
             images=[record for _, record in images],
-            truth=None,
+            objects=None,
             source=source,
-            compress=compress,
         )
     return LasImport(
         out=out,
-        n_points=len(point_cloud),
+        n_points=streamed.points,
         n_images=len(images),
+        n_tiles=streamed.tiles,
         cameras=list(cameras),
         crs=crs,
         crs_from=crs_from,

@@ -355,6 +355,80 @@ def reconstruct_run(
     return RunModel(run_id, poles, frames, model, registered, len(xyz), notes), superimposed
 
 
+@dataclass(frozen=True)
+class RunInput:
+    """What :func:`reconstruct_run` needs for one run: its points, the ground near it and the
+    direction of the road (small arrays: a run is a task of its own on a survey).
+
+    Attributes
+    ----------
+    run_id : the run's number
+    xyz : (N, 3) float64, metres: the run's guardrail points
+    ground : (G, 3) float64: road-surface points near them
+    toward_road : (3,) horizontal direction from the run toward the trajectory
+    """
+
+    run_id: int
+    xyz: np.ndarray
+    ground: np.ndarray
+    toward_road: np.ndarray
+
+
+def split_runs(
+    points: np.ndarray,
+    ground_xyz: np.ndarray,
+    trajectory: np.ndarray,
+    params: ReconstructionParams = ReconstructionParams(),
+) -> list[RunInput]:
+    """Group guardrail points into runs (§4.1) and give each the ground near it.
+
+    Parameters
+    ----------
+    points : (N, 3) float64, metres: the guardrail points of a drive, in drive order
+    ground_xyz : (G, 3) float64: road-surface points (all of them, or at least those within
+        ``params.runs.ground_reach_m`` of a guardrail point), in drive order
+    trajectory : (T, 3) float64: the vehicle's positions (which side the road is on)
+    """
+    points = np.asarray(points, np.float64)
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise ReconstructionError(f"points must be (N, 3), got {points.shape}")
+    if not np.isfinite(points).all():
+        raise ReconstructionError("guardrail points contain NaN or infinity")
+    ground_xyz = np.asarray(ground_xyz, np.float64).reshape(-1, 3)
+    run_of_point = group_runs(points, params.runs)
+    n_runs = int(run_of_point.max()) + 1 if len(run_of_point) else 0
+    ground_tree = cKDTree(ground_xyz[:, :2]) if len(ground_xyz) else None
+    track = np.asarray(trajectory, np.float64)[:, :2]
+    track_tree = cKDTree(track)
+    order = np.argsort(run_of_point, kind="stable")
+    starts = np.searchsorted(run_of_point[order], np.arange(n_runs + 1))
+    runs = []
+    for r in range(n_runs):
+        run_xyz = points[order[starts[r] : starts[r + 1]]]
+        near_ground = np.zeros((0, 3))
+        if ground_tree is not None:
+            step, reach = params.runs.ground_query_step, params.runs.ground_reach_m
+            lists = ground_tree.query_ball_point(run_xyz[::step, :2], reach)
+            index = np.unique(np.concatenate([np.asarray(i, np.int64) for i in lists]))
+            near_ground = ground_xyz[index]
+        centre = run_xyz.mean(axis=0)
+        toward = np.zeros(3)
+        toward[:2] = track[track_tree.query(centre[:2])[1]] - centre[:2]
+        runs.append(RunInput(r, run_xyz, near_ground, toward))
+    return runs
+
+
+def reconstruct_run_input(
+    run: RunInput,
+    params: ReconstructionParams = ReconstructionParams(),
+    max_units: int | None = None,
+) -> tuple[RunModel, Superimposition | None]:
+    """:func:`reconstruct_run` of one :class:`RunInput`."""
+    return reconstruct_run(
+        run.xyz, run.ground, run.toward_road, run_id=run.run_id, params=params, max_units=max_units
+    )
+
+
 def reconstruct_guardrails(
     xyz: np.ndarray,
     guardrail: np.ndarray,
@@ -378,33 +452,14 @@ def reconstruct_guardrails(
     xyz = np.asarray(xyz, np.float64)
     if xyz.ndim != 2 or xyz.shape[1] != 3:
         raise ReconstructionError(f"points must be (N, 3), got {xyz.shape}")
-    points = xyz[np.asarray(guardrail, bool)]
-    if not np.isfinite(points).all():
-        raise ReconstructionError("guardrail points contain NaN or infinity")
-    run_of_point = group_runs(points, params.runs)
-    n_runs = int(run_of_point.max()) + 1 if len(run_of_point) else 0
-    ground_xyz = xyz[np.asarray(ground, bool)]
-    ground_tree = cKDTree(ground_xyz[:, :2]) if len(ground_xyz) else None
-    track = np.asarray(trajectory, np.float64)[:, :2]
-    track_tree = cKDTree(track)
-    runs, superimposed = [], []
-    for r in tqdm(range(n_runs), desc="reconstruct", unit="run", disable=not progress):
-        run_xyz = points[run_of_point == r]
-        near_ground = np.zeros((0, 3))
-        if ground_tree is not None:
-            step, reach = params.runs.ground_query_step, params.runs.ground_reach_m
-            lists = ground_tree.query_ball_point(run_xyz[::step, :2], reach)
-            index = np.unique(np.concatenate([np.asarray(i, np.int64) for i in lists]))
-            near_ground = ground_xyz[index]
-        centre = run_xyz.mean(axis=0)
-        toward = np.zeros(3)
-        toward[:2] = track[track_tree.query(centre[:2])[1]] - centre[:2]
-        model, sup = reconstruct_run(
-            run_xyz, near_ground, toward, run_id=r, params=params, max_units=max_units
-        )
-        runs.append(model)
-        superimposed.append(sup)
-    return Reconstruction(runs, superimposed)
+    runs = split_runs(
+        xyz[np.asarray(guardrail, bool)], xyz[np.asarray(ground, bool)], trajectory, params
+    )
+    results = [
+        reconstruct_run_input(run, params, max_units)
+        for run in tqdm(runs, desc="reconstruct", unit="run", disable=not progress)
+    ]
+    return Reconstruction([m for m, _ in results], [s for _, s in results])
 
 
 def guardrail_mask(point_segment: np.ndarray, label: np.ndarray) -> np.ndarray:

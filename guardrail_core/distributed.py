@@ -1,0 +1,178 @@
+"""Tiles as Dask tasks: an embedded ``LocalCluster`` by default, any Dask scheduler beyond.
+
+``guardrail process`` maps one task per tile over a :class:`dask.distributed.Client`. Without a
+scheduler address it starts a ``LocalCluster`` of worker *processes* (one thread each: the CNN
+and the geometry are single-threaded per tile, and processes keep one tile's memory from
+another's); with ``--scheduler tcp://HOST:PORT`` the same tasks go to an existing cluster
+(``dask-scheduler`` and ``dask-worker`` on several machines, or any Dask deployment). Tasks
+carry paths on shared storage, never arrays of points.
+
+A worker that dies is replaced and its task retried by Dask (the scheduler's
+``allowed-failures``, 3 by default); a task that still fails is reported by :func:`map_tasks`
+instead of stopping the others.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass
+from typing import Any, Generic, TypeVar
+
+from tqdm import tqdm
+
+from guardrail_core.errors import InvalidOptionError
+
+T = TypeVar("T")
+R = TypeVar("R")
+
+
+@dataclass(frozen=True)
+class ClusterSpec:
+    """Where tasks run.
+
+    Attributes
+    ----------
+    workers : worker processes of the embedded LocalCluster; 0: no Dask, tasks run one after
+        another in this process (ignored with ``scheduler``)
+    scheduler : address of an existing Dask scheduler (``tcp://host:8786``), or None
+    memory_limit : per worker of the LocalCluster, Dask's syntax (``"3GiB"``, ``"auto"``: the
+        machine's memory shared equally)
+    """
+
+    workers: int = 0
+    scheduler: str | None = None
+    memory_limit: str = "auto"
+
+    def __post_init__(self) -> None:
+        if self.workers < 0:
+            raise InvalidOptionError(f"workers must be 0 or more, got {self.workers}")
+
+    @property
+    def label(self) -> str:
+        """``"none"`` (in this process), ``"local"`` (a LocalCluster) or the scheduler address."""
+        if self.scheduler:
+            return self.scheduler
+        return "local" if self.workers > 0 else "none"
+
+
+def default_workers() -> int:
+    """One worker per core this process may use."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
+@contextmanager
+def dask_client(spec: ClusterSpec) -> Iterator[Any]:
+    """A ``dask.distributed.Client`` for ``spec`` (None when tasks run in this process); an
+    embedded LocalCluster is closed on exit.
+
+    Raises
+    ------
+    InvalidOptionError
+        The scheduler cannot be reached.
+    """
+    if not spec.scheduler and spec.workers == 0:
+        yield None
+        return
+    from dask.distributed import Client, LocalCluster
+
+    if spec.scheduler:
+        try:
+            client = Client(spec.scheduler, timeout="20s")
+        except OSError as exc:
+            raise InvalidOptionError(
+                f"cannot reach the Dask scheduler at {spec.scheduler} ({exc})"
+            ) from exc
+        try:
+            yield client
+        finally:
+            client.close()
+        return
+    cluster = LocalCluster(
+        n_workers=spec.workers,
+        threads_per_worker=1,
+        processes=True,
+        memory_limit=spec.memory_limit,
+        dashboard_address=None,
+        silence_logs=logging.ERROR,
+    )
+    client = Client(cluster)
+    try:
+        yield client
+    finally:
+        client.close()
+        cluster.close()
+
+
+@dataclass(frozen=True)
+class TaskFailure(Generic[T]):
+    """A task that failed beyond Dask's retries: its input and the error, as text."""
+
+    item: T
+    error: str
+
+
+def map_tasks(
+    client: Any,
+    function: Callable[[T], R],
+    items: Sequence[T],
+    *,
+    desc: str,
+    unit: str,
+    progress: bool,
+    points: Callable[[R], int] | None = None,
+    failures: tuple[type[BaseException], ...] = (),
+) -> list[R | TaskFailure[T]]:
+    """``function`` over ``items`` on the cluster (or here, without a client), in the order of
+    ``items``, with a progress bar (tasks done / total, and points/s where ``points`` counts
+    a result's points).
+
+    A task that raises one of ``failures``, or whose workers kept dying (Dask's
+    ``KilledWorker``, after its retries), becomes a :class:`TaskFailure` and the other tasks go
+    on; any other exception is a defect and propagates.
+    """
+    results: list[R | TaskFailure[T] | None] = [None] * len(items)
+    done_points = 0
+    start = time.perf_counter()
+    with tqdm(total=len(items), desc=desc, unit=unit, disable=not progress) as bar:
+
+        def record(i: int, result: R | TaskFailure[T]) -> None:
+            nonlocal done_points
+            results[i] = result
+            if points is not None and not isinstance(result, TaskFailure):
+                done_points += points(result)
+                rate = done_points / max(time.perf_counter() - start, 1e-9)
+                bar.set_postfix_str(f"{rate / 1e3:,.0f} k points/s")
+            bar.update()
+
+        if client is None:
+            for i, item in enumerate(items):
+                try:
+                    result = function(item)
+                except failures as exc:
+                    record(i, TaskFailure(item, f"{type(exc).__name__}: {exc}"))
+                else:
+                    record(i, result)
+        else:
+            from dask.distributed import as_completed
+            from distributed.scheduler import KilledWorker
+
+            futures = client.map(function, list(items), pure=False)
+            position = {future.key: i for i, future in enumerate(futures)}
+            for future in as_completed(futures):
+                i = position[future.key]
+                if future.status == "finished":
+                    record(i, future.result())
+                else:
+                    error = future.exception()
+                    if not isinstance(error, (KilledWorker, *failures)):
+                        client.cancel(futures)
+                        raise error
+                    record(i, TaskFailure(items[i], f"{type(error).__name__}: {error}"))
+    return [r for r in results if r is not None]

@@ -1,0 +1,418 @@
+"""``guardrail process``: a drive through extraction (§3) and reconstruction (§4) into one run
+folder, tile by tile.
+
+The drive is cut into processing tiles along the trajectory (:mod:`.tile_plan`); each tile is
+extracted, classified and label-corrected with a margin of its neighbours (:mod:`.tile_task`),
+as a Dask task or here; the parts are joined (:mod:`.stitch`); the guardrail points of all
+tiles are grouped into runs, so a run across a tile edge is one run, and the runs are
+reconstructed, again as tasks. The run folder is written whole or not at all.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import shutil
+import time
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
+from functools import partial
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from guardrail_core.distributed import ClusterSpec, TaskFailure, dask_client, map_tasks
+from guardrail_core.errors import (
+    EmptyDriveError,
+    GuardrailError,
+    ReconstructionError,
+    TilesFailedError,
+)
+from guardrail_core.extract.classify import GuardrailClassifier
+from guardrail_core.extract.pipeline import ExtractionParams
+from guardrail_core.formats.atomic import staged_folder
+from guardrail_core.formats.drive import Drive, PointCloud, drive_parts, open_drive
+from guardrail_core.formats.drive_tiles import vehicle_station
+from guardrail_core.formats.run_folder import RUN_FORMAT_VERSION, write_run_files
+from guardrail_core.formats.run_folder_paths import RunFolder
+from guardrail_core.formats.run_info import DriveRef, ModelRef, Processing, RunInfo, TileOutcome
+from guardrail_core.process.stitch import stitch_parts
+from guardrail_core.process.tile_plan import ProcessTile, plan_tiles
+from guardrail_core.process.tile_task import TileJob, process_window, run_tile_job
+from guardrail_core.reconstruct.pipeline import (
+    Reconstruction,
+    ReconstructionParams,
+    reconstruct_run_input,
+    split_runs,
+    write_reconstruction,
+)
+from guardrail_core.sensors.track import TrackCoordinates, track_coordinates
+
+#: Metres of its neighbours a tile sees on either side: more than a post's or a hole's slices
+#: and the label correction's reach, so a tile's own points come out as in the whole drive.
+DEFAULT_MARGIN_M = 20.0
+#: Metres of trajectory per processing tile on the command line.
+DEFAULT_TILE_M = 100.0
+_PARTS_DIR = ".parts"
+
+
+def process_drive(
+    drive: Drive,
+    model: GuardrailClassifier,
+    out: Path,
+    *,
+    params: ExtractionParams = ExtractionParams(),
+    reconstruction: ReconstructionParams | None = ReconstructionParams(),
+    overwrite: bool = False,
+    inputs: Iterable[str | os.PathLike] = (),
+    progress: bool = False,
+    tile_m: float | None = None,
+    margin_m: float = DEFAULT_MARGIN_M,
+) -> RunInfo:
+    """Extract guardrail segments from a drive held in memory with a trained model, reconstruct
+    the guardrails and write the run folder, in this process.
+
+    Parameters
+    ----------
+    drive : the drive
+    model : the trained classifier
+    out : the run folder to write; written whole or not at all
+    params : extraction parameters
+    reconstruction : reconstruction parameters (§4); None leaves the reconstruction out
+    overwrite : replace an existing run folder
+    inputs : further inputs besides the drive's parts (the model folder), which ``out`` must
+        not be, hold, or replace
+    progress : show progress bars
+    tile_m : metres of trajectory per processing tile; None: the whole drive as one tile
+    margin_m : metres of its neighbours each tile sees on either side
+
+    Returns
+    -------
+    The run's ``run.json`` content (counts, model, parameters, tiles), with
+    ``reconstruction``: the summary of the reconstruction (when reconstructed).
+
+    Raises
+    ------
+    EmptyDriveError
+        The drive has no points.
+    OutputExistsError
+        ``out`` exists, is not empty and ``overwrite`` is False.
+    InputInsideOutputError
+        ``out`` is, holds or would replace a part of the drive or another input; raised before
+        any work.
+
+    References
+    ----------
+    Matsumoto et al. 2019, §3 (Fig. 3) and §4.
+    """
+    if len(drive.points) == 0:
+        raise EmptyDriveError(f"{drive.root}: the drive has no points")
+    clock = time.perf_counter()
+    track = track_coordinates(drive.points.xyz, drive.points.gps_time, drive.trajectory)
+    track_stage = {"seconds": round(time.perf_counter() - clock, 4), "points": len(drive.points)}
+    tiles = _plan(drive, params, tile_m, margin_m)
+    offsets = drive.tile_offsets()
+
+    def run_tile(tile: ProcessTile, part: Path) -> TileOutcome:
+        window, window_track, index = _window_in_memory(drive, track, tile)
+        return process_window(
+            window,
+            window_track,
+            index,
+            offsets,
+            model,
+            tile,
+            part,
+            params,
+            ground_reach_m=(reconstruction or ReconstructionParams()).runs.ground_reach_m,
+            progress=progress and len(tiles) == 1,
+        )
+
+    return _process(
+        drive,
+        model,
+        out,
+        tiles,
+        run_here=run_tile,
+        tile_points=np.diff(offsets).tolist(),
+        params=params,
+        reconstruction=reconstruction,
+        overwrite=overwrite,
+        inputs=inputs,
+        progress=progress,
+        processing=(tile_m, margin_m, ClusterSpec()),
+        client=None,
+        stages={"track": track_stage},
+        clock=clock,
+    )
+
+
+def process_drive_folder(
+    drive_root: str | os.PathLike,
+    model_dir: str | os.PathLike,
+    out: Path,
+    *,
+    params: ExtractionParams = ExtractionParams(),
+    reconstruction: ReconstructionParams | None = ReconstructionParams(),
+    overwrite: bool = False,
+    progress: bool = False,
+    tile_m: float | None = DEFAULT_TILE_M,
+    margin_m: float = DEFAULT_MARGIN_M,
+    cluster: ClusterSpec | None = None,
+    client: object | None = None,
+) -> RunInfo:
+    """:func:`process_drive` of a drive folder too long to hold in memory: each tile is a task
+    that reads only the drive tiles it touches, on the Dask cluster of ``cluster`` (an
+    embedded LocalCluster, or the scheduler it names), or one after another here for
+    ``cluster.workers == 0``. ``client``: an existing ``dask.distributed.Client`` to use
+    instead (``cluster`` then only names it in ``run.json``).
+
+    A tile that fails with a named error is recorded in ``run.json`` (``processing.tiles``) and
+    its points get ``POINT_UNPROCESSED``; the rest of the drive completes.
+    """
+    from guardrail_core.extract.model_folder import load_model
+
+    cluster = cluster or ClusterSpec()
+    source = open_drive(drive_root, with_truth=False)
+    if source.tiles.points == 0:
+        raise EmptyDriveError(f"{source.root}: the drive has no points")
+    model = load_model(Path(model_dir))
+    drive = source.drive(PointCloud(*([np.zeros(0)] * 5)))  # metadata only: no points here
+    drive = dataclasses.replace(drive, tiles=source.tiles)
+    tiles = _plan(drive, params, tile_m, margin_m)
+    reach = (reconstruction or ReconstructionParams()).runs.ground_reach_m
+
+    def job(tile: ProcessTile, part: Path) -> TileJob:
+        return TileJob(
+            drive=str(Path(drive_root).resolve()),
+            model=str(Path(model_dir).resolve()),
+            part=str(part.resolve()),
+            tile=tile,
+            params=params.to_json(),
+            ground_reach_m=reach,
+        )
+
+    return _process(
+        drive,
+        model,
+        out,
+        tiles,
+        make_job=job,
+        tile_points=[t.points for t in source.tiles.tiles],
+        params=params,
+        reconstruction=reconstruction,
+        overwrite=overwrite,
+        inputs=[model_dir],
+        progress=progress,
+        processing=(tile_m, margin_m, cluster),
+        client=client,
+        n_points=source.tiles.points,
+    )
+
+
+def _plan(
+    drive: Drive, params: ExtractionParams, tile_m: float | None, margin_m: float
+) -> list[ProcessTile]:
+    length = float(vehicle_station(drive.trajectory, drive.trajectory.time[-1:])[0])
+    return plan_tiles(length, tile_m, margin_m, params.segments.slice_length_m)
+
+
+def _window_in_memory(
+    drive: Drive, track: TrackCoordinates, tile: ProcessTile
+) -> tuple[Drive, TrackCoordinates, np.ndarray]:
+    """The points of an in-memory drive that ``tile`` sees, their track coordinates and
+    indices."""
+    lo, hi = tile.window_m
+    inside = (track.station >= lo) & (track.station < hi)
+    if inside.all():
+        return drive, track, np.arange(len(drive.points), dtype=np.int64)
+    points = drive.points
+    window = PointCloud(
+        points.xyz[inside],
+        points.gps_time[inside],
+        points.intensity[inside],
+        points.rotation[inside],
+        points.phase[inside],
+    )
+    window_track = TrackCoordinates(
+        track.station[inside], track.lateral[inside], track.height[inside]
+    )
+    return (
+        dataclasses.replace(drive, points=window, truth=None),
+        window_track,
+        np.flatnonzero(inside),
+    )
+
+
+def _process(
+    drive: Drive,
+    model: GuardrailClassifier,
+    out: Path,
+    tiles: list[ProcessTile],
+    *,
+    run_here: Callable[[ProcessTile, Path], TileOutcome] | None = None,
+    make_job: Callable[[ProcessTile, Path], TileJob] | None = None,
+    tile_points: list[int],
+    params: ExtractionParams,
+    reconstruction: ReconstructionParams | None,
+    overwrite: bool,
+    inputs: Iterable[str | os.PathLike],
+    progress: bool,
+    processing: tuple[float | None, float, ClusterSpec],
+    client: object | None,
+    n_points: int | None = None,
+    stages: dict[str, dict[str, float]] | None = None,
+    clock: float | None = None,
+) -> RunInfo:
+    """The tiles (``run_here``: each processed here, one after another; ``make_job``: each a
+    Dask task on ``client`` or on the cluster of ``processing``), then the stitching and the
+    reconstruction."""
+    out = Path(out)
+    started = time.strftime("%Y-%m-%dT%H:%M:%S%z")
+    clock = time.perf_counter() if clock is None else clock
+    n_points = len(drive.points) if n_points is None else n_points
+    tile_m, margin_m, cluster = processing
+    sources = [*drive_parts(drive.root), *inputs]
+    with staged_folder(out, overwrite=overwrite, inputs=sources) as staging:
+        parts_dir = staging / _PARTS_DIR
+        parts_dir.mkdir()
+        part_of = {t.number: parts_dir / f"{t.number:06d}" for t in tiles}
+        with _client(client, cluster) as dask:
+            results: list[Any]
+            if run_here is not None:
+                results = map_tasks(
+                    None,
+                    lambda t: run_here(t, part_of[t.number]),
+                    tiles,
+                    desc="tiles",
+                    unit="tile",
+                    progress=progress and len(tiles) > 1,
+                    points=lambda o: o.points,
+                    failures=(GuardrailError,),
+                )
+            else:
+                assert make_job is not None  # one of the two is given (the callers above)
+                results = map_tasks(
+                    dask,
+                    run_tile_job,
+                    [make_job(t, part_of[t.number]) for t in tiles],
+                    desc="tiles",
+                    unit="tile",
+                    progress=progress,
+                    points=lambda o: o.points,
+                )
+            outcomes = [_outcome_of(tile, r) for tile, r in zip(tiles, results, strict=True)]
+            ok = [o.error is None for o in outcomes]
+            if not any(ok):
+                raise TilesFailedError(
+                    f"{drive.root}: every tile failed: "
+                    + "; ".join(f"tile {o.number}: {o.error}" for o in outcomes)
+                )
+            done = [part_of[t.number] if good else None for t, good in zip(tiles, ok, strict=True)]
+            stitched = stitch_parts(staging, done, tile_points)
+            image_files = [record.file for record in drive.images]
+            info = RunInfo(
+                format_version=RUN_FORMAT_VERSION,
+                created=started,
+                drive=DriveRef(
+                    path=str(Path(drive.root).resolve()), points=n_points, tiles=len(tile_points)
+                ),
+                model=ModelRef(version=model.version, mode=model.mode, threshold=model.threshold),
+                params=params.to_json(),
+                counts=stitched.counts,
+                images=tuple(image_files),
+            )
+            timings: dict[str, Any] = {
+                "points_in": n_points,
+                "stages": {**(stages or {}), **stitched.stages},
+                "total_seconds": 0.0,
+            }
+            write_run_files(
+                staging,
+                info=info.to_json(),
+                segments=stitched.segments,
+                timings=timings,
+                image_files=image_files,
+                embeddings=stitched.embeddings,
+            )
+            if reconstruction is not None:
+                start = time.perf_counter()
+                runs = split_runs(
+                    stitched.guardrail_xyz,
+                    stitched.ground_xyz,
+                    drive.trajectory.position,
+                    reconstruction,
+                )
+                results_runs = map_tasks(
+                    dask,
+                    partial(reconstruct_run_input, params=reconstruction),
+                    runs,
+                    desc="reconstruct",
+                    unit="run",
+                    progress=progress,
+                )
+                models = []
+                for r in results_runs:
+                    if isinstance(r, TaskFailure):
+                        raise ReconstructionError(
+                            f"reconstructing run {r.item.run_id} failed: {r.error}"
+                        )
+                    models.append(r)
+                seconds = round(time.perf_counter() - start, 4)
+                summary = write_reconstruction(
+                    RunFolder(staging).reconstruction.root,
+                    Reconstruction([m for m, _ in models], [s for _, s in models]),
+                    params=reconstruction,
+                    origin=drive.origin,
+                    crs=drive.crs,
+                    seconds=seconds,
+                )
+                timings["stages"]["reconstruct"] = {
+                    "seconds": seconds,
+                    "points": len(stitched.guardrail_xyz),
+                }
+                info = dataclasses.replace(info, reconstruction=summary)
+        wall = round(time.perf_counter() - clock, 4)
+        info = dataclasses.replace(
+            info,
+            processing=Processing(
+                tile_m=None if len(tiles) == 1 else tile_m,
+                margin_m=margin_m,
+                workers=cluster.workers,
+                scheduler=cluster.label,
+                seconds=wall,
+                tiles=tuple(outcomes),
+            ),
+        )
+        run_json = {**info.to_json()}
+        run_json.pop("reconstruction", None)  # run.json does not hold the summary
+        folder = RunFolder(staging)
+        folder.run_file.write_text(json.dumps(run_json, indent=2) + "\n")
+        timings["total_seconds"] = wall
+        folder.timings_file.write_text(json.dumps(timings, indent=2) + "\n")
+        _remove_tree(parts_dir)
+    return info
+
+
+@contextmanager
+def _client(client: object | None, cluster: ClusterSpec) -> Iterator[object | None]:
+    """The caller's client, or one for ``cluster`` (None: tasks run here)."""
+    if client is not None:
+        yield client
+        return
+    with dask_client(cluster) as own:
+        yield own
+
+
+def _outcome_of(tile: ProcessTile, result: TileOutcome | TaskFailure) -> TileOutcome:
+    """A tile's outcome; a task that failed beyond Dask's retries becomes a failed outcome."""
+    if isinstance(result, TaskFailure):
+        return TileOutcome(tile.number, tile.station_m, 0, 0.0, result.error)
+    return result
+
+
+def _remove_tree(path: Path) -> None:
+    """Remove the parts folder (inside the staging folder: never an input)."""
+    shutil.rmtree(path)

@@ -1,0 +1,357 @@
+"""One processing tile: extraction (§3), classification and label correction on the points the
+tile sees, written as a *part* of the run for the points and segments it owns.
+
+A part is a folder of small files (``process/stitch.py`` joins the parts into the run folder)::
+
+    part.json          the tile's counts and timings
+    segments.npz       SEGMENT_FIELDS rows of the segments it owns (image: drive-wide index)
+    crops/NNNNNN.jpg   their crops, by the segment's number within the part
+    embeddings.npy     their backbone embeddings (fast models)
+    points/DDDDDD.npz  per drive tile D it owns points of: their index in D and their segment
+                       (within the part; POINT_ROAD, POINT_OFF_ROAD)
+    guardrail.npz      its guardrail points and the road points near them, with their
+                       drive-wide indices (what the reconstruction gathers)
+
+Only paths travel to a worker: the drive and model folders and the part folder, all on storage
+every worker sees; a worker reads the drive tiles its window touches and nothing else.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+from scipy.spatial import cKDTree
+
+from guardrail_core.errors import GuardrailError
+from guardrail_core.extract.classify import EMBEDDING_DIM, GuardrailClassifier
+from guardrail_core.extract.correct import correct_labels
+from guardrail_core.extract.pipeline import ExtractionParams, extract
+from guardrail_core.formats.drive import Drive, DriveSource, PointCloud, open_drive
+from guardrail_core.formats.run_folder import (
+    CROP_OK,
+    POINT_OFF_ROAD,
+    POINT_ROAD,
+    SEGMENT_FIELDS,
+)
+from guardrail_core.formats.run_info import TileOutcome
+from guardrail_core.process.tile_plan import ProcessTile
+from guardrail_core.sensors.track import track_coordinates
+from guardrail_core.timing import StageTimer
+
+PART_FILE = "part.json"
+
+
+@dataclass(frozen=True)
+class TileJob:
+    """Everything a worker needs for one tile: paths on shared storage and small values.
+
+    Attributes
+    ----------
+    drive : the drive folder
+    model : the model folder
+    part : the folder to write the tile's part into (it must not exist)
+    tile : the tile
+    params : extraction parameters (as ``ExtractionParams.to_json()``)
+    ground_reach_m : road points this close (horizontally) to a guardrail point go with it to
+        the reconstruction (the reconstruction's ``runs.ground_reach_m``)
+    threads : torch threads on the worker
+    """
+
+    drive: str
+    model: str
+    part: str
+    tile: ProcessTile
+    params: dict
+    ground_reach_m: float
+    threads: int = 1
+
+
+def run_tile_job(job: TileJob) -> TileOutcome:
+    """Process one tile on a worker (a Dask task): open the drive and the model (once per worker
+    process), read the tiles the window touches, write the part.
+
+    A named :class:`~guardrail_core.errors.GuardrailError` (a corrupt drive tile, say) is
+    returned in the outcome, so the rest of the drive completes; anything else propagates.
+    """
+    import torch
+
+    start = time.perf_counter()
+    torch.set_num_threads(max(1, job.threads))
+    try:
+        source = _open_source(job.drive)
+        model = _load_model(job.model)
+        timer = StageTimer(0)
+        with timer.stage("read"):  # the drive tiles the window touches, and their stations
+            drive, track, index = read_window(source, job.tile)
+        timer.points_in = len(drive.points)
+        timer.stages["read"]["points"] = len(drive.points)
+        return process_window(
+            drive,
+            track,
+            index,
+            source.tiles.offsets(),
+            model,
+            job.tile,
+            Path(job.part),
+            ExtractionParams.from_json(job.params),
+            ground_reach_m=job.ground_reach_m,
+            timer=timer,
+        )
+    except GuardrailError as exc:
+        return TileOutcome(
+            number=job.tile.number,
+            station_m=job.tile.station_m,
+            points=0,
+            seconds=round(time.perf_counter() - start, 4),
+            error=f"{type(exc).__name__}: {exc}",
+        )
+
+
+@functools.lru_cache(maxsize=2)
+def _open_source(path: str) -> DriveSource:
+    return open_drive(path, with_truth=False)
+
+
+@functools.lru_cache(maxsize=2)
+def _load_model(path: str) -> GuardrailClassifier:
+    from guardrail_core.extract.model_folder import load_model
+
+    return load_model(Path(path))
+
+
+def read_window(source: DriveSource, tile: ProcessTile) -> tuple[Drive, object, np.ndarray]:
+    """The points a tile sees, read from the drive tiles its window touches.
+
+    Returns the window as a :class:`Drive` (with the images its points may be cropped from),
+    the points' track coordinates, and their drive-wide indices (M,) int64.
+    """
+    lo, hi = tile.window_m
+    ids = source.tiles.touching(lo, hi)
+    points, _ = source.read_tiles(ids)
+    offsets = source.tiles.offsets()
+    index = np.concatenate(
+        [np.arange(offsets[i], offsets[i + 1], dtype=np.int64) for i in ids] or [np.zeros(0, int)]
+    )
+    track = track_coordinates(points.xyz, points.gps_time, source.trajectory)
+    inside = (track.station >= lo) & (track.station < hi)
+    if not inside.all():
+        points = PointCloud(*(getattr(points, f)[inside] for f in _CLOUD_FIELDS))
+        track = type(track)(track.station[inside], track.lateral[inside], track.height[inside])
+        index = index[inside]
+    return source.drive(points), track, index
+
+
+_CLOUD_FIELDS = ("xyz", "gps_time", "intensity", "rotation", "phase")
+
+
+def process_window(
+    drive: Drive,
+    track: object,
+    index: np.ndarray,
+    drive_offsets: np.ndarray,
+    model: GuardrailClassifier,
+    tile: ProcessTile,
+    part: Path,
+    params: ExtractionParams,
+    *,
+    ground_reach_m: float,
+    progress: bool = False,
+    timer: StageTimer | None = None,
+) -> TileOutcome:
+    """Extract, classify and correct the points ``drive`` holds (a tile's window), and write the
+    part of what the tile owns into the new folder ``part``.
+
+    Parameters
+    ----------
+    drive : the window's points (with all the drive's images and its whole trajectory)
+    track : their track coordinates (:class:`~guardrail_core.sensors.track.TrackCoordinates`)
+    index : (M,) int64, their drive-wide indices
+    drive_offsets : (T + 1,) int64, the drive-wide index of each drive tile's first point
+    """
+    start = time.perf_counter()
+    part = Path(part)
+    timer = timer or StageTimer(len(drive.points))
+    station = track.station  # type: ignore[attr-defined]
+    window = drive
+    if len(drive.points):
+        # Only the images a segment of this window may be cropped from (by GPS time, §3.2).
+        reach = params.crops.time_window_s
+        t_lo, t_hi = drive.points.gps_time.min() - reach, drive.points.gps_time.max() + reach
+        keep = [i for i, r in enumerate(drive.images) if t_lo <= r.gps_time <= t_hi]
+        image_ids = np.asarray(keep, np.int64)
+        window = dataclasses.replace(drive, images=[drive.images[i] for i in keep])
+    else:
+        image_ids = np.zeros(0, np.int64)
+    part.mkdir(parents=True)
+    owned_points = (station >= tile.station_m[0]) & (station < tile.station_m[1])
+    if len(drive.points) == 0 or not owned_points.any():
+        _write_empty_part(part, index, owned_points, drive_offsets)
+        return _outcome(tile, int(owned_points.sum()), start, part, timer, {})
+
+    result = extract(window, model.input_size, params, timer=timer, progress=progress, track=track)  # type: ignore[arg-type]
+    segments, choice = result.segments, result.choice
+    ok = np.flatnonzero(choice.status == CROP_OK)
+    with timer.stage("classify", points=len(segments)):
+        crop_probability = np.full(len(segments), np.nan, np.float64)
+        embeddings = None
+        if model.mode == "fast":  # kept for quick retraining (zeros where there is no crop)
+            embeddings = np.zeros((len(segments), EMBEDDING_DIM), np.float32)
+        if len(ok):
+            if embeddings is not None:
+                embeddings[ok] = model.embed(result.crops[ok], progress=progress)
+                crop_probability[ok] = model.predict_proba(embeddings=embeddings[ok])
+            else:
+                crop_probability[ok] = model.predict_proba(result.crops[ok], progress=progress)
+        probability = model.segment_proba(result.features, crop_probability)
+        raw_label = np.nan_to_num(probability, nan=0.0) >= model.threshold
+    with timer.stage("correction", points=len(segments)):
+        label = correct_labels(raw_label, result.extents(), params.correction)
+
+    with timer.stage("write", points=len(segments)):
+        # A segment belongs to the tile that owns its slice (tile edges are slice edges).
+        slice_start = segments.slice_index * params.segments.slice_length_m
+        owned = (slice_start >= tile.station_m[0]) & (slice_start < tile.station_m[1])
+        own_ids = np.flatnonzero(owned)
+        renumber = np.full(len(segments), -1, np.int64)
+        renumber[own_ids] = np.arange(len(own_ids))
+        summary = result.summary
+        image = np.full(len(segments), -1, np.int64)  # drive-wide image indices
+        chosen = choice.image >= 0
+        image[chosen] = image_ids[choice.image[chosen]]
+        table = {
+            "component": segments.component,
+            "slice_index": segments.slice_index,
+            "n_points": segments.n_points,
+            "centroid": summary.centroid,
+            "bbox_min": summary.bbox_min,
+            "bbox_max": summary.bbox_max,
+            "lateral": summary.lateral,
+            "height": summary.height,
+            "time": summary.time,
+            "image": image,
+            "rect": choice.rect,
+            "crop_status": choice.status,
+            "crop_probability": crop_probability.astype(np.float32),
+            "probability": probability.astype(np.float32),
+            "features": result.features,
+            "raw_label": raw_label,
+            "label": label,
+        }
+        own_table: dict[str, Any] = {
+            name: np.asarray(table[name], dtype)[own_ids]
+            for name, (dtype, _) in SEGMENT_FIELDS.items()
+        }
+        np.savez(part / "segments.npz", **own_table)
+        (part / "crops").mkdir()
+        for s in own_ids[choice.status[own_ids] == CROP_OK]:
+            cv2.imwrite(
+                str(part / "crops" / f"{renumber[s]:06d}.jpg"),
+                np.ascontiguousarray(result.crops[s][:, :, ::-1]),
+                [cv2.IMWRITE_JPEG_QUALITY, 92],
+            )
+        if embeddings is not None:
+            np.save(part / "embeddings.npy", embeddings[own_ids].astype(np.float16))
+
+        # Points: a segment's points go with their segment; road and off-road points with
+        # their station.
+        point_segment = result.point_segment
+        in_segment = point_segment >= 0
+        owned_points = np.where(
+            in_segment, owned[np.maximum(point_segment, 0)], owned_points
+        ).astype(bool)
+        local = np.where(in_segment, renumber[np.maximum(point_segment, 0)], point_segment)
+        _write_point_pieces(part, index[owned_points], local[owned_points], drive_offsets)
+
+        # The reconstruction's share: owned guardrail points and the owned road points near
+        # any guardrail point this window sees (a run across the tile edge included).
+        guardrail = in_segment & label[np.maximum(point_segment, 0)]
+        road = (point_segment == POINT_ROAD) & owned_points
+        ground_keep = np.zeros(0, np.int64)
+        if guardrail.any() and road.any():
+            tree = cKDTree(drive.points.xyz[guardrail, :2])
+            road_ids = np.flatnonzero(road)
+            distance, _ = tree.query(
+                drive.points.xyz[road_ids, :2], distance_upper_bound=ground_reach_m
+            )
+            ground_keep = road_ids[np.isfinite(distance)]
+        own_guardrail = np.flatnonzero(guardrail & owned_points)
+        np.savez(
+            part / "guardrail.npz",
+            index=index[own_guardrail],
+            xyz=drive.points.xyz[own_guardrail],
+            ground_index=index[ground_keep],
+            ground_xyz=drive.points.xyz[ground_keep],
+        )
+        status = choice.status[own_ids]
+        counts: dict[str, Any] = {
+            "points": int(owned_points.sum()),
+            "road_points": int((point_segment[owned_points] == POINT_ROAD).sum()),
+            "off_road_points": int((point_segment[owned_points] == POINT_OFF_ROAD).sum()),
+            "segment_points": int(segments.n_points[own_ids].sum()),
+            "segments": len(own_ids),
+            "crops": {
+                "ok": int((status == CROP_OK).sum()),
+                "no_image": int((status == 1).sum()),
+                "too_small": int((status == 2).sum()),
+            },
+            "guardrail_segments_raw": int(raw_label[own_ids].sum()),
+            "guardrail_segments": int(label[own_ids].sum()),
+            "guardrail_points": int(segments.n_points[own_ids][label[own_ids]].sum()),
+            "window_points": len(drive.points),
+        }
+    return _outcome(tile, counts["points"], start, part, timer, counts)
+
+
+def _outcome(
+    tile: ProcessTile, points: int, start: float, part: Path, timer: StageTimer, counts: dict
+) -> TileOutcome:
+    seconds = round(time.perf_counter() - start, 4)
+    (part / PART_FILE).write_text(
+        json.dumps({"counts": counts, "timings": timer.as_json(), "seconds": seconds}, indent=1)
+    )
+    return TileOutcome(tile.number, tile.station_m, points, seconds)
+
+
+def _write_point_pieces(
+    part: Path, index: np.ndarray, segment: np.ndarray, drive_offsets: np.ndarray
+) -> None:
+    """Split owned points (drive-wide ``index``, ``segment``) by the drive tile they are in."""
+    (part / "points").mkdir(exist_ok=True)
+    tile_of = np.searchsorted(drive_offsets, index, side="right") - 1
+    for d in np.unique(tile_of):
+        mine = tile_of == d
+        np.savez(
+            part / "points" / f"{int(d):06d}.npz",
+            index=(index[mine] - drive_offsets[d]).astype(np.int64),
+            segment=segment[mine].astype(np.int32),
+        )
+
+
+def _write_empty_part(
+    part: Path, index: np.ndarray, owned: np.ndarray, drive_offsets: np.ndarray
+) -> None:
+    """A part without segments: its owned points (if any) are all off the road's segments."""
+    arrays: dict[str, np.ndarray] = {}
+    for name, (dtype, shape) in SEGMENT_FIELDS.items():
+        width = tuple(0 if s is None else s for s in shape)
+        arrays[name] = np.zeros((0, *width), dtype)
+    np.savez(part / "segments.npz", **arrays)  # type: ignore[arg-type]
+    (part / "crops").mkdir()
+    _write_point_pieces(
+        part, index[owned], np.full(int(owned.sum()), POINT_OFF_ROAD, np.int32), drive_offsets
+    )
+    np.savez(
+        part / "guardrail.npz",
+        index=np.zeros(0, np.int64),
+        xyz=np.zeros((0, 3)),
+        ground_index=np.zeros(0, np.int64),
+        ground_xyz=np.zeros((0, 3)),
+    )

@@ -1,0 +1,210 @@
+"""Tile-wise processing: tiles with margins give the whole drive's results; Dask runs equal
+in-process runs, survive a killed worker, and report a corrupt tile while the rest completes."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from guardrail_core.distributed import ClusterSpec
+from guardrail_core.formats.drive import Drive, load_drive, open_drive, write_drive_files
+from guardrail_core.formats.run_folder import POINT_UNPROCESSED
+from guardrail_core.formats.run_folder_paths import RunFolder
+from guardrail_core.process import process_drive, process_drive_folder
+from guardrail_core.process.tile_plan import plan_tiles
+from guardrail_core.sensors.track import track_coordinates
+
+TILE_M = 10.0
+
+
+def final_labels(run: Path) -> np.ndarray:
+    """(N,) int8 per drive point: 1 guardrail, 0 other segment, or the point's negative code."""
+    folder = RunFolder.open(run)
+    segment, label = folder.point_segment(), folder.segments()["label"]
+    out = np.where(segment < 0, segment, 0).astype(np.int8)
+    out[segment >= 0] = label[segment[segment >= 0]]
+    return out
+
+
+def run_models(run: Path) -> list[dict]:
+    return json.loads((run / "reconstruction" / "models.json").read_text())["runs"]
+
+
+@pytest.fixture(scope="module")
+def tiled_drive(drive: Drive, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The test drive re-written in tiles of 10 m of driving."""
+    out = tmp_path_factory.mktemp("tiled") / "drive"
+    out.mkdir()
+    for name in ("images",):
+        os.symlink(drive.root / name, out / name)
+    write_drive_files(
+        out,
+        crs=drive.crs,
+        origin=drive.origin,
+        scanner=drive.scanner,
+        trajectory=drive.trajectory,
+        points=drive.points,
+        cameras=list(drive.cameras.values()),
+        images=drive.images,
+        truth=drive.truth,
+        source=drive.source,
+        tile_m=TILE_M,
+    )
+    return out
+
+
+@pytest.fixture(scope="module")
+def whole_run(drive: Drive, model_path: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from guardrail_core.extract.model_folder import load_model
+
+    out = tmp_path_factory.mktemp("whole") / "run"
+    info = process_drive(drive, load_model(model_path), out)
+    assert info.processing is not None and len(info.processing.tiles) == 1
+    return out
+
+
+def test_tiles_give_the_whole_drives_labels_runs_and_poles(
+    drive: Drive, model_path: Path, whole_run: Path, tmp_path: Path
+):
+    from guardrail_core.extract.model_folder import load_model
+
+    out = tmp_path / "tiled"
+    info = process_drive(drive, load_model(model_path), out, tile_m=TILE_M)
+    assert info.processing is not None and len(info.processing.tiles) >= 3
+    assert np.array_equal(final_labels(out), final_labels(whole_run))
+    whole, tiled = run_models(whole_run), run_models(out)
+    assert len(tiled) == len(whole)
+    assert [len(r["poles"]) for r in tiled] == [len(r["poles"]) for r in whole]
+    assert RunFolder.open(out).info().counts == RunFolder.open(whole_run).info().counts
+
+
+def test_a_run_across_tile_edges_is_reconstructed_as_one(drive: Drive, whole_run: Path):
+    """The test drive's guardrail runs are longer than a tile: each is one run all the same."""
+    runs = run_models(whole_run)
+    assert runs, "the test drive has guardrail runs"
+    folder = RunFolder.open(whole_run)
+    segments = folder.segments()
+    guardrail = np.flatnonzero(segments["label"])
+    stations = segments["slice_index"][guardrail] * 0.5
+    assert stations.max() - stations.min() > 2 * TILE_M  # the guardrail spans several tiles
+    # (the tiled run's runs were compared one for one with these in the test above)
+
+
+def test_folder_processing_in_process_equals_the_in_memory_run(
+    tiled_drive: Path, model_path: Path, whole_run: Path, tmp_path: Path
+):
+    out = tmp_path / "run"
+    info = process_drive_folder(
+        tiled_drive, model_path, out, tile_m=TILE_M, cluster=ClusterSpec(workers=0)
+    )
+    assert info.drive.tiles == len(open_drive(tiled_drive).tiles) > 1
+    assert len(list((out / "points").glob("*.npz"))) == info.drive.tiles
+    assert np.array_equal(final_labels(out), final_labels(whole_run))
+    assert len(run_models(out)) == len(run_models(whole_run))
+
+
+def test_a_window_reads_only_the_drive_tiles_it_touches(tiled_drive: Path, tmp_path: Path):
+    """Every drive tile a processing tile's window does not touch is unreadable: the window
+    still reads, and holds exactly the points of the tiles it touches that lie in it."""
+    from guardrail_core.process.tile_task import read_window
+
+    source = open_drive(tiled_drive, with_truth=False)
+    tile = plan_tiles(32.0, TILE_M, 2.0, 0.5)[1]
+    touched = source.tiles.touching(*tile.window_m)
+    assert 0 < len(touched) < len(source.tiles)
+    copy = tmp_path / "drive"
+    copy.mkdir()
+    for item in tiled_drive.iterdir():
+        if item.name == "points":
+            (copy / "points").mkdir()
+            for f in item.iterdir():
+                (copy / "points" / f.name).write_bytes(f.read_bytes())
+        else:
+            os.symlink(item, copy / item.name)
+    for i, record in enumerate(source.tiles.tiles):
+        if i not in touched:
+            (copy / record.file).write_bytes(b"not a point cloud")
+    window, track, index = read_window(open_drive(copy, with_truth=False), tile)
+    whole = load_drive(tiled_drive, with_truth=False)
+    station = track_coordinates(whole.points.xyz, whole.points.gps_time, whole.trajectory).station
+    expected = np.flatnonzero((station >= tile.window_m[0]) & (station < tile.window_m[1]))
+    assert np.array_equal(index, expected)
+    assert np.array_equal(window.points.xyz, whole.points.xyz[expected])
+
+
+def test_a_corrupt_tile_is_reported_by_name_and_the_rest_completes(
+    tiled_drive: Path, model_path: Path, whole_run: Path, tmp_path: Path
+):
+    copy = tmp_path / "drive"
+    copy.mkdir()
+    for item in tiled_drive.iterdir():
+        if item.name == "points":
+            (copy / "points").mkdir()
+            for f in item.iterdir():
+                (copy / "points" / f.name).write_bytes(f.read_bytes())
+        else:
+            os.symlink(item, copy / item.name)
+    source = open_drive(copy)
+    last = len(source.tiles) - 1
+    bad = source.tiles.tiles[last]
+    (copy / bad.file).write_bytes(b"this is no point cloud")
+    out = tmp_path / "run"
+    info = process_drive_folder(
+        copy, model_path, out, tile_m=TILE_M, margin_m=1.0, cluster=ClusterSpec(workers=0)
+    )
+    assert info.processing is not None
+    failed = info.processing.failed
+    assert failed and all(bad.file in (t.error or "") for t in failed)
+    assert all("DriveFormatError" in (t.error or "") for t in failed)
+    assert len(failed) < len(info.processing.tiles)  # the others finished
+    labels, whole = final_labels(out), final_labels(whole_run)
+    done = labels != POINT_UNPROCESSED
+    assert done.any() and (~done).any()
+    # Points of the tiles that completed and lie away from the failed ones are as in the whole.
+    assert (labels[done] == whole[done]).mean() > 0.99
+
+
+def test_a_local_cluster_run_equals_the_in_process_run_and_survives_a_killed_worker(
+    tiled_drive: Path, model_path: Path, whole_run: Path, tmp_path: Path
+):
+    from dask.distributed import Client, LocalCluster
+
+    with (
+        LocalCluster(n_workers=2, threads_per_worker=1, dashboard_address=None) as cluster,
+        Client(cluster) as client,
+    ):
+        killed: list[int] = []
+
+        def kill_a_busy_worker() -> None:
+            # Wait for a worker to be busy with a tile, then kill its process.
+            while not killed:
+                busy = [w for w, tasks in client.processing().items() if tasks]
+                if busy:
+                    pids = client.run(os.getpid, workers=busy[:1])
+                    os.kill(pids[busy[0]], signal.SIGKILL)
+                    killed.append(pids[busy[0]])
+                time.sleep(0.01)
+
+        killer = threading.Thread(target=kill_a_busy_worker, daemon=True)
+        killer.start()
+        out = tmp_path / "run"
+        info = process_drive_folder(
+            tiled_drive,
+            model_path,
+            out,
+            tile_m=TILE_M,
+            cluster=ClusterSpec(workers=2),
+            client=client,
+        )
+        killer.join(timeout=60)
+    assert killed, "a worker was killed while it held a tile"
+    assert info.processing is not None and not info.processing.failed
+    assert np.array_equal(final_labels(out), final_labels(whole_run))
+    assert len(run_models(out)) == len(run_models(whole_run))
