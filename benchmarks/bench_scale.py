@@ -61,7 +61,7 @@ def simulate(drives: Path, length: float, seed: int) -> Path:
     if not (out / "drive.json").is_file():
         subprocess.run(
             [*GUARDRAIL, "simulate", str(out), "--length", str(length), "--seed", str(seed)]
-            + ["--quiet", "--overwrite"],
+            + ["--tile-m", "25", "--quiet", "--overwrite"],
             check=True,
         )
     return out

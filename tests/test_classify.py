@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import json
 import pickle
@@ -12,15 +13,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from torch import nn
 
 from guardrail_core.errors import (
     IncompatibleModelError,
     InputInsideOutputError,
     InvalidOptionError,
+    ModelError,
     ModelFormatError,
     OutputExistsError,
     TrainingDataError,
 )
+from guardrail_core.extract import cnn_runtime
+from guardrail_core.extract.backbone import CropEmbedder, load_backbone
 from guardrail_core.extract.classify import (
     CLASS_NAMES,
     EMBEDDING_DIM,
@@ -29,6 +34,12 @@ from guardrail_core.extract.classify import (
     classification_metrics,
     embed_crops,
     train_classifier,
+)
+from guardrail_core.extract.cnn_runtime import (
+    RUNTIME_ENV,
+    CropNetwork,
+    chosen_runtime,
+    onnx_runtime_installed,
 )
 from guardrail_core.extract.model_folder import MODEL_FORMAT_VERSION, load_model, save_model
 
@@ -409,3 +420,95 @@ def test_saving_onto_a_model_needs_overwrite(
         save_model(other, saved, overwrite=True, inputs=[labels_file])
     assert labels_file.read_text() == "segment,label\n"
     shutil.rmtree(saved)
+
+
+needs_onnx = pytest.mark.skipif(
+    not onnx_runtime_installed(), reason="onnxruntime and onnx are not installed"
+)
+
+
+@needs_onnx
+def test_onnx_runtime_gives_torchs_embeddings_and_probabilities(
+    fast_model: GuardrailClassifier, data: tuple[np.ndarray, np.ndarray, np.ndarray]
+) -> None:
+    crops = data[0][:24]
+    reference = embed_crops(crops, runtime="torch")
+    fast = embed_crops(crops, runtime="onnxruntime", batch_size=7)  # a ragged last batch
+    assert fast.shape == reference.shape and fast.dtype == np.float32
+    assert np.abs(fast - reference).max() < 1e-4
+    proba = fast_model.predict_proba(crops, runtime="onnxruntime")
+    assert np.abs(proba - fast_model.predict_proba(crops, runtime="torch")).max() < 1e-4
+    for runtime in ("torch", "onnxruntime"):
+        empty = embed_crops(np.zeros((0, 128, 128, 3), np.uint8), runtime=runtime)
+        assert empty.shape == (0, EMBEDDING_DIM)
+
+
+@needs_onnx
+def test_a_full_model_runs_the_same_on_both_runtimes() -> None:
+    crops, labels, groups = synthetic_crops(6, 10, size=64, n_groups=4, seed=SEED + 2)
+    params = ClassifierParams(mode="full", input_size_px=64, full_epochs=1, batch_size=8)
+    model = train_classifier(crops, labels, groups=groups, params=params)
+    for method in (model.predict_proba, model.embed):
+        torch_out, onnx_out = method(crops, runtime="torch"), method(crops, runtime="onnxruntime")
+        assert onnx_out.shape == torch_out.shape
+        assert np.abs(onnx_out - torch_out).max() < 1e-4
+        # Exporting leaves the network in eval mode (batch norms on their running statistics).
+        np.testing.assert_array_equal(method(crops, runtime="torch"), torch_out)
+
+
+@needs_onnx
+def test_onnx_runtime_runs_on_as_many_threads_as_torch(
+    data: tuple[np.ndarray, np.ndarray, np.ndarray],
+) -> None:
+    network = CropNetwork(CropEmbedder(load_backbone()).eval(), 128, (EMBEDDING_DIM,))
+    crops = data[0][:4]
+    before = torch.get_num_threads()
+    outputs = []
+    try:
+        for threads in (1, 2):
+            torch.set_num_threads(threads)
+            outputs.append(network(crops))
+            options = network._session().get_session_options()
+            assert options.intra_op_num_threads == threads
+    finally:
+        torch.set_num_threads(before)
+    np.testing.assert_allclose(outputs[0], outputs[1], atol=1e-5)
+    # Sessions do not copy; the exported model does, and a copy runs.
+    np.testing.assert_array_equal(copy.deepcopy(network)(crops), outputs[0])
+
+
+def test_the_runtime_is_chosen_by_name_or_environment(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv(RUNTIME_ENV, "torch")
+    assert chosen_runtime() == "torch"
+    assert CropNetwork(nn.Identity(), 32, (1,)).runtime == "torch"
+    monkeypatch.setenv(RUNTIME_ENV, "tensorrt")
+    with pytest.raises(InvalidOptionError, match=RUNTIME_ENV):
+        chosen_runtime()
+    with pytest.raises(InvalidOptionError, match="runtime: expected one of auto"):
+        chosen_runtime("onnx")
+    monkeypatch.delenv(RUNTIME_ENV)
+    monkeypatch.setattr(cnn_runtime, "onnx_runtime_installed", lambda: False)
+    assert chosen_runtime() == "torch"
+    with pytest.raises(ModelError, match="pip install onnxruntime"):
+        chosen_runtime("onnxruntime")
+
+
+@needs_onnx
+def test_a_failed_export_falls_back_to_torch_only_when_chosen_by_auto(
+    data: tuple[np.ndarray, np.ndarray, np.ndarray], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    def broken(module: nn.Module, input_size: int) -> bytes:
+        raise RuntimeError("no exporter here")
+
+    monkeypatch.setattr(cnn_runtime, "export_onnx", broken)
+    crops = data[0][:3]
+    module = CropEmbedder(load_backbone()).eval()
+    network = CropNetwork(module, 128, (EMBEDDING_DIM,), runtime="auto")
+    with pytest.warns(RuntimeWarning, match="no exporter here"):
+        out = network(crops)
+    assert network.runtime == "torch"
+    torch_network = CropNetwork(module, 128, (EMBEDDING_DIM,), runtime="torch")
+    np.testing.assert_array_equal(out, torch_network(crops))
+    asked = CropNetwork(module, 128, (EMBEDDING_DIM,), runtime="onnxruntime")
+    with pytest.raises(ModelError, match=f"{RUNTIME_ENV}=torch"):
+        asked(crops)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from guardrail_core.errors import IncompatibleModelError, InvalidOptionError, ModelFormatError
-from guardrail_core.extract.model_folder import load_model
+from guardrail_core.extract.model_folder import DEFAULT_MODEL_DIR, load_model
 from guardrail_core.extract.segment_head import (
     SegmentHead,
     SegmentHeadParams,
@@ -99,3 +99,43 @@ def test_a_segment_head_of_other_features_is_refused(model_path: Path, tmp_path:
     (copy / "model.json").write_text(json.dumps(document))
     with pytest.raises(ModelFormatError, match="disagree"):
         load_model(copy)
+
+
+def test_the_proba_range_holds_every_crop_probability_and_is_reached() -> None:
+    rng = np.random.default_rng(2)
+    head = fit_segment_head(*synthetic(2000, rng), QUICK)
+    features = synthetic(200, rng)[0]
+    lo, hi = head.proba_range(features)
+    assert lo.shape == hi.shape == (len(features),) and np.all(lo <= hi)
+    # Crop logits from one clipped end to the other, every 0.0023: the extremes found on this
+    # grid lie within it of the exact ones.
+    end = np.log((1 - 1e-5) / 1e-5)
+    grid = 1.0 / (1.0 + np.exp(-np.linspace(-end, end, 10_001)))
+    proba = np.stack([head.proba(features, np.full(len(features), p)) for p in grid])
+    assert np.all(proba >= lo - 1e-6) and np.all(proba <= hi + 1e-6)
+    np.testing.assert_allclose(proba.min(axis=0), lo, atol=1e-3)
+    np.testing.assert_allclose(proba.max(axis=0), hi, atol=1e-3)
+    with pytest.raises(InvalidOptionError, match="expected 3 features"):
+        head.proba_range(features[:, :2])
+
+
+def test_where_the_shape_decides_every_crop_gives_the_same_label() -> None:
+    model = load_model(DEFAULT_MODEL_DIR)
+    head = model.segment_head
+    assert head is not None
+    rng = np.random.default_rng(3)
+    n_features = head.n_inputs - 2
+    features = (
+        head.mean[:n_features] + head.scale[:n_features] * rng.normal(size=(500, n_features))
+    ).astype(np.float32)
+    decided = model.shape_decides(features)
+    assert 0.1 < decided.mean() < 0.9
+    n = len(features)
+    crop_probabilities = [np.full(n, p) for p in (0.0, 1e-3, 0.3, 0.5, 0.7, 1.0)]
+    crop_probabilities += list(rng.random((5, n)))  # a different crop for every segment
+    labels = np.stack(
+        [model.segment_proba(features, p) >= model.threshold for p in crop_probabilities]
+    )
+    assert np.all(labels[:, decided] == labels[0, decided])
+    lo, hi = head.proba_range(features[~decided])
+    assert np.all((lo < model.threshold + 1e-4) & (hi >= model.threshold - 1e-4))

@@ -151,12 +151,17 @@ def test_same_seed_same_drive(tmp_path: Path) -> None:
             options=SMALL_OPTIONS,
             progress=False,
         )
+    tiles = [
+        p.relative_to(first).as_posix()
+        for folder in ("points", "truth/points")
+        for p in sorted((first / folder).iterdir())
+    ]
+    assert "points/index.json" in tiles and "points/000000.laz" in tiles
     for name in (
-        "points.laz",
+        *tiles,
         "trajectory.csv",
         "images.json",
         "cameras.json",
-        "truth/points.npz",
         "truth/objects.json",
         "images/left/000002.jpg",
         "truth/masks/front/000002.png",

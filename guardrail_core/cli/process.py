@@ -33,7 +33,7 @@ def add_parser(subparsers: common.Subparsers) -> None:
         type=float,
         default=None,
         metavar="METRES",
-        help="metres of its neighbours each tile sees on either side (default 20)",
+        help="metres of its neighbours each tile sees on either side (default 10)",
     )
     tiles.add_argument(
         "--workers",

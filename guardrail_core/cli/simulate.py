@@ -4,9 +4,15 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections import Counter
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from guardrail_core.cli import common
+
+if TYPE_CHECKING:
+    from guardrail_core.formats.drive import DriveSource
+    from guardrail_core.synth.simulate import SimulationSummary
 
 
 def add_parser(subparsers: common.Subparsers) -> None:
@@ -43,6 +49,14 @@ def add_parser(subparsers: common.Subparsers) -> None:
         help="image size (default 1024x768)",
     )
     own.add_argument(
+        "--tile-m",
+        type=float,
+        default=None,
+        metavar="METRES",
+        help="write the points in tiles of this many metres of driving (default 25); the "
+        "same seed gives the same points whatever the tiles",
+    )
+    own.add_argument(
         "--scanner",
         choices=("profile", "multibeam"),
         help="profile: the RIEGL VQ-250 profile scanner of the paper's vehicle (the default); "
@@ -65,8 +79,7 @@ def add_parser(subparsers: common.Subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from guardrail_core.formats.drive import load_drive
-    from guardrail_core.formats.drive_summary import describe_drive
+    from guardrail_core.formats.drive import open_drive
     from guardrail_core.synth.scene import load_scene_spec, random_scene_spec
     from guardrail_core.synth.simulate import SimulationOptions, simulate_drive
 
@@ -85,6 +98,8 @@ def run(args: argparse.Namespace) -> int:
         spec["scanner"] = {**(spec.get("scanner") or {}), "kind": args.scanner}
         if args.frame_every is not None:
             spec["scanner"]["frame_every_m"] = args.frame_every
+    from guardrail_core.formats.drive_tiles import DEFAULT_DRIVE_TILE_M
+
     options = SimulationOptions(
         image_every_m=args.image_every, image_size=args.image_size, compress=not args.las
     )
@@ -97,8 +112,47 @@ def run(args: argparse.Namespace) -> int:
         overwrite=args.overwrite,
         inputs=[scene_file] if scene_file is not None else [],
         progress=not args.quiet,
+        tile_m=DEFAULT_DRIVE_TILE_M if args.tile_m is None else args.tile_m,
     )
     timing = ", ".join(f"{k} {v:.1f} s" for k, v in summary.seconds.items())
     print(f"simulated {summary.length_m:.1f} m in {sum(summary.seconds.values()):.1f} s ({timing})")
-    print(describe_drive(load_drive(summary.out)))
+    # The drive without its points: a long drive's points do not fit in memory.
+    print(describe_simulation(summary, open_drive(summary.out)))
     return 0
+
+
+def describe_simulation(summary: SimulationSummary, source: DriveSource) -> str:
+    """Lines describing a simulated drive from what the simulation counted and the drive's
+    metadata (its points are not read)."""
+    from guardrail_core.classes import GUARDRAIL_CLASSES, TruthClass
+
+    size_mb = sum(p.stat().st_size for p in source.root.rglob("*") if p.is_file()) / 1e6
+    scanner = source.scanner
+    per_camera = Counter(record.camera for record in source.images)
+    runs = [o for o in source.objects if o.get("kind") == "guardrail"]
+    others = Counter(o.get("kind") for o in source.objects if o.get("kind") != "guardrail")
+    on_rails = sum(n for c, n in summary.points_by_class.items() if c in GUARDRAIL_CLASSES)
+    return "\n".join(
+        [
+            f"drive      {source.root.resolve()}  ({size_mb:.1f} MB)",
+            f"CRS        {source.crs}, local origin {', '.join(f'{v:.3f}' for v in source.origin)}",
+            f"trajectory {summary.length_m:.1f} m in {summary.duration_s:.1f} s, "
+            f"{len(source.trajectory)} poses",
+            f"points     {summary.n_points:,} in {summary.n_tiles} tile(s), from a {scanner.kind} "
+            f"scanner at {scanner.rotation_rate_hz:g} turns/s",
+            f"images     {len(source.images)}: "
+            + ", ".join(
+                f"{name} {n} ({source.cameras[name].width}x{source.cameras[name].height})"
+                for name, n in per_camera.items()
+            ),
+            f"truth      {len(runs)} guardrail runs "
+            f"({', '.join(sorted({r['design'] for r in runs}))}), {on_rails:,} guardrail points "
+            f"({100 * on_rails / max(summary.n_points, 1):.1f}%)",
+            "           others: " + ", ".join(f"{k} {n}" for k, n in sorted(others.items())),
+            "           points by class: "
+            + ", ".join(
+                f"{TruthClass(c).name.lower()} {n:,}"
+                for c, n in sorted(summary.points_by_class.items())
+            ),
+        ]
+    )

@@ -9,7 +9,7 @@ import numpy as np
 
 from guardrail_core.classes import GUARDRAIL_CLASSES
 from guardrail_core.errors import MissingDriveFileError, RunFolderError
-from guardrail_core.evaluate.reconstruction import evaluate_reconstruction, PolePointCounter
+from guardrail_core.evaluate.reconstruction import PolePointCounter, evaluate_reconstruction
 from guardrail_core.evaluate.results import (
     ClassCounts,
     ClassMetrics,

@@ -12,17 +12,16 @@ from __future__ import annotations
 import hashlib
 import importlib.metadata
 import threading
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
 from torch import nn
-from tqdm import tqdm
 
 from guardrail_core.errors import InvalidOptionError, ModelError
 from guardrail_core.extract.classifier_params import SIZE_STEP
+from guardrail_core.extract.cnn_runtime import BATCH_SIZE, CropNetwork, chosen_runtime
 
 ARCHITECTURE = "efficientnet-lite0"
 #: Length of a crop embedding: channels of EfficientNet-Lite0's last feature map.
@@ -37,6 +36,7 @@ _CODE_PACKAGE = "efficientnet-lite-pytorch"
 _BACKBONE: nn.Module | None = None
 _BACKBONE_INFO: dict[str, Any] | None = None
 _BACKBONE_LOCK = threading.Lock()
+_EMBEDDERS: dict[tuple[str, int], CropNetwork] = {}  # (runtime, input size) -> the backbone
 
 
 def _weights_file() -> Path:
@@ -159,27 +159,14 @@ def check_embeddings(embeddings: object, n: int | None = None) -> np.ndarray:
     return array
 
 
-def to_input(batch: np.ndarray) -> torch.Tensor:
+def normalise(crops: torch.Tensor) -> torch.Tensor:
     """(B, S, S, 3) uint8 -> (B, 3, S, S) float32 normalised for the Lite models."""
-    x = torch.from_numpy(np.ascontiguousarray(batch)).permute(0, 3, 1, 2).float()
-    return (x - PIXEL_MEAN) / PIXEL_SCALE
+    return (crops.permute(0, 3, 1, 2).float() - PIXEL_MEAN) / PIXEL_SCALE
 
 
-def batches(n: int, batch_size: int, *, progress: bool, desc: str) -> Iterator[slice]:
-    """Consecutive slices of at most ``batch_size`` over ``range(n)``, with a progress bar."""
-    if (
-        isinstance(batch_size, bool)
-        or not isinstance(batch_size, int | np.integer)
-        or batch_size < 1
-    ):
-        raise InvalidOptionError(
-            f"batch_size: expected a positive whole number, got {batch_size!r}"
-        )
-    with tqdm(total=n, desc=desc, unit="crop", disable=not progress, leave=False) as bar:
-        for start in range(0, n, batch_size):
-            stop = min(start + batch_size, n)
-            yield slice(start, stop)
-            bar.update(stop - start)
+def to_input(batch: np.ndarray) -> torch.Tensor:
+    """(B, S, S, 3) uint8 array -> (B, 3, S, S) float32 tensor normalised for the Lite models."""
+    return normalise(torch.from_numpy(np.ascontiguousarray(batch)))
 
 
 def pooled_features(net: nn.Module, x: torch.Tensor) -> torch.Tensor:
@@ -187,7 +174,40 @@ def pooled_features(net: nn.Module, x: torch.Tensor) -> torch.Tensor:
     return net.extract_features(x).mean(dim=(2, 3))  # type: ignore[operator]
 
 
-def embed_crops(crops: np.ndarray, *, batch_size: int = 64, progress: bool = False) -> np.ndarray:
+class CropEmbedder(nn.Module):
+    """(B, S, S, 3) uint8 crops -> (B, 1280) float32 pooled features of ``net``: the
+    normalisation and the network in one module, as ONNX Runtime runs it."""
+
+    def __init__(self, net: nn.Module) -> None:
+        super().__init__()
+        self.net = net
+
+    def forward(self, crops: torch.Tensor) -> torch.Tensor:
+        return pooled_features(self.net, normalise(crops))
+
+
+def backbone_embedder(input_size: int, runtime: str | None = None) -> CropNetwork:
+    """The frozen backbone as a :class:`CropNetwork` for ``input_size`` px crops, made once per
+    process and runtime (``runtime``: see :func:`~guardrail_core.extract.cnn_runtime.chosen_runtime`)."""
+    key = (chosen_runtime(runtime), int(input_size))
+    with _BACKBONE_LOCK:
+        embedder = _EMBEDDERS.get(key)
+    if embedder is None:
+        embedder = CropNetwork(
+            CropEmbedder(load_backbone()).eval(), input_size, (EMBEDDING_DIM,), runtime=key[0]
+        )
+        with _BACKBONE_LOCK:
+            embedder = _EMBEDDERS.setdefault(key, embedder)
+    return embedder
+
+
+def embed_crops(
+    crops: np.ndarray,
+    *,
+    batch_size: int = BATCH_SIZE,
+    progress: bool = False,
+    runtime: str | None = None,
+) -> np.ndarray:
     """Embed crops with the frozen ImageNet-pretrained backbone.
 
     Parameters
@@ -197,17 +217,16 @@ def embed_crops(crops: np.ndarray, *, batch_size: int = 64, progress: bool = Fal
         :class:`~guardrail_core.extract.classifier_params.ClassifierParams`).
     batch_size : int, crops per forward pass.
     progress : bool, show a tqdm bar.
+    runtime : ``auto``, ``onnxruntime`` or ``torch``; None: ``$GUARDRAIL_CNN_RUNTIME`` (see
+        :mod:`~guardrail_core.extract.cnn_runtime`).
 
     Returns
     -------
     embeddings : (N, 1280) float32
-        Global average of EfficientNet-Lite0's last feature map. At 128 px this runs at about
-        100 crops/s on two CPU cores.
+        Global average of EfficientNet-Lite0's last feature map. At 128 px on one thread of this
+        project's 2-core machine: about 5 ms a crop on ONNX Runtime, 13 ms on torch
+        (``benchmarks/bench_classify.py``).
     """
     crops = check_crops(crops)
-    net = load_backbone()
-    out = np.empty((len(crops), EMBEDDING_DIM), np.float32)
-    with torch.inference_mode():
-        for sl in batches(len(crops), batch_size, progress=progress, desc="embedding crops"):
-            out[sl] = pooled_features(net, to_input(crops[sl])).numpy()
-    return out
+    embedder = backbone_embedder(crops.shape[1], runtime)
+    return embedder(crops, batch_size=batch_size, progress=progress, desc="embedding crops")

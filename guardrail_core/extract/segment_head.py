@@ -20,6 +20,7 @@ from guardrail_core.extract.torch_threads import one_thread
 from guardrail_core.params import StageParams, param
 
 _LOGIT_CLIP = 1e-5  # crop probabilities are clipped to [eps, 1 - eps] before the logit
+_MAX_LOGIT = float(np.log((1 - _LOGIT_CLIP) / _LOGIT_CLIP))  # so crop logits lie in +-this
 
 
 @dataclass(frozen=True)
@@ -63,7 +64,7 @@ def head_inputs(features: np.ndarray, crop_proba: np.ndarray) -> np.ndarray:
     )
 
 
-def _network(n_inputs: int, hidden_units: int) -> nn.Module:
+def _network(n_inputs: int, hidden_units: int) -> nn.Sequential:
     return nn.Sequential(nn.Linear(n_inputs, hidden_units), nn.ReLU(), nn.Linear(hidden_units, 2))
 
 
@@ -75,7 +76,7 @@ class SegmentHead:
     mean, scale : (F + 2,) float32, standardisation of :func:`head_inputs`
     """
 
-    def __init__(self, mean: np.ndarray, scale: np.ndarray, net: nn.Module) -> None:
+    def __init__(self, mean: np.ndarray, scale: np.ndarray, net: nn.Sequential) -> None:
         self.mean = mean
         self.scale = scale
         self._net = net
@@ -99,6 +100,55 @@ class SegmentHead:
         z = torch.from_numpy((x - self.mean) / self.scale)
         with torch.inference_mode(), one_thread():
             return torch.softmax(self._net(z), dim=1)[:, 1].numpy().astype(np.float64)
+
+    def proba_range(self, features: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The least and the greatest P(guardrail) the head can give each segment with a crop,
+        whatever the crop's probability: what the shape alone leaves open.
+
+        Exact: with the other inputs fixed, the head's output logit is piecewise linear in the
+        crop logit (one hidden ReLU layer), so its extremes over the clipped logits lie at the
+        ends or where a hidden unit switches on or off.
+
+        Parameters
+        ----------
+        features : (S, F) float32, as for :meth:`proba`
+
+        Returns
+        -------
+        lo, hi : (S,) float64 in [0, 1], lo <= :meth:`proba` <= hi for every crop probability
+        """
+        x = head_inputs(features, np.full(len(features), 0.5)).astype(np.float64)
+        if x.shape[1] != self.n_inputs:
+            raise InvalidOptionError(
+                f"segment head: expected {self.n_inputs - 2} features per segment, got "
+                f"{x.shape[1] - 2}"
+            )
+        state = {k: v.double().numpy() for k, v in self._net.state_dict().items()}
+        w1, b1 = state["0.weight"], state["0.bias"]  # (H, F + 2), (H,)
+        w_out = state["2.weight"][1] - state["2.weight"][0]  # (H,): class 1's logit minus 0's
+        b_out = float(state["2.bias"][1] - state["2.bias"][0])
+        logit_col = self.n_inputs - 2
+        z = (x - self.mean.astype(np.float64)) / self.scale.astype(np.float64)
+        z[:, logit_col] = 0.0
+        # Hidden pre-activations as a + slope * t, t the crop logit: (S, H) and (H,)
+        slope = w1[:, logit_col] / float(self.scale[logit_col])
+        a = z @ w1.T + b1 - float(self.mean[logit_col]) * slope
+        with np.errstate(divide="ignore", invalid="ignore"):
+            switch = np.where(slope != 0, -a / slope, -_MAX_LOGIT)  # (S, H)
+        t = np.concatenate(
+            [
+                np.full((len(x), 2), [-_MAX_LOGIT, _MAX_LOGIT]),
+                np.clip(switch, -_MAX_LOGIT, _MAX_LOGIT),
+            ],
+            axis=1,
+        )  # (S, H + 2) candidate crop logits
+        lo = np.full(len(x), np.inf)
+        hi = np.full(len(x), -np.inf)
+        for k in range(t.shape[1]):  # one (S, H) pass per candidate keeps the memory small
+            logit = np.maximum(a + t[:, k : k + 1] * slope, 0.0) @ w_out + b_out
+            lo, hi = np.minimum(lo, logit), np.maximum(hi, logit)
+        sigmoid = 1.0 / (1.0 + np.exp(-np.stack([lo, hi])))
+        return sigmoid[0], sigmoid[1]
 
     def weights(self, prefix: str) -> dict[str, np.ndarray]:
         """Named arrays for ``weights.npz``: ``<prefix>mean``, ``<prefix>scale``, the layers."""

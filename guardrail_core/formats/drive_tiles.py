@@ -33,6 +33,10 @@ TILES_FORMAT_VERSION = 1
 TILES_DIR = "points"
 INDEX_FILE = "points/index.json"
 TRUTH_TILES_DIR = "truth/points"
+#: Metres of driving per tile the simulator and the importers write by default: a quarter of a
+#: processing tile (``guardrail process --tile-m 100``), so a tile's window (its 100 m and a
+#: 10 m margin either side) reads little more than itself (about 150 m of points).
+DEFAULT_DRIVE_TILE_M = 25.0
 
 
 @dataclass(frozen=True)

@@ -41,7 +41,7 @@ from guardrail_core.errors import (
 )
 from guardrail_core.formats.atomic import check_output, staged_folder
 from guardrail_core.formats.drive import ImageRecord, write_drive_metadata
-from guardrail_core.formats.drive_tiles import TiledPointWriter
+from guardrail_core.formats.drive_tiles import DEFAULT_DRIVE_TILE_M, TiledPointWriter
 from guardrail_core.geom.frames import make_transform
 from guardrail_core.importers.calibration import read_calibrations, require_file
 from guardrail_core.importers.delivery_scanner import (
@@ -90,7 +90,7 @@ __all__ = [
 #: Height of the trajectory's reference point above the road, as the simulator's vehicle has it.
 DEFAULT_REFERENCE_HEIGHT_M = 1.8
 #: Metres of driving per tile of the imported drive.
-DEFAULT_TILE_M = 100.0
+DEFAULT_TILE_M = DEFAULT_DRIVE_TILE_M
 #: Points read from a LAS/LAZ file at a time: about 40 MB of arrays in flight per chunk.
 DEFAULT_CHUNK_POINTS = 250_000
 

@@ -14,11 +14,13 @@ walls and racks are centred on that line, a facade's road-facing face lies on it
 from __future__ import annotations
 
 from collections.abc import Callable
+from functools import cache
 
 import numpy as np
+import trimesh
 
 from guardrail_core.classes import TruthClass
-from guardrail_core.geom.mesh import Mesh, box, cylinder, dome, segment_box, sphere, tube
+from guardrail_core.geom.mesh import Mesh, cylinder, dome, segment_box, sphere, tube
 from guardrail_core.synth.materials import PAINTS
 from guardrail_core.synth.mesh import MeshBuilder
 
@@ -59,7 +61,7 @@ class _Frame:
 
     def box(self, a: float, c: float, u: float, size_acu) -> Mesh:
         """A box centred at local (a, c, u) with size (along, across, up)."""
-        return box(self.at(a, c, u), np.asarray(size_acu, np.float64), self.rotation)
+        return _boxes(self.at(a, c, u), np.asarray(size_acu, np.float64), self.rotation)
 
 
 def _horizontal_unit(v, name: str) -> np.ndarray:
@@ -71,6 +73,49 @@ def _horizontal_unit(v, name: str) -> np.ndarray:
     if n < 1e-9:
         raise ValueError(f"{name} must have a horizontal component")
     return h / n
+
+
+@cache
+def _unit_box() -> Mesh:
+    """The corners (8, 3) of a unit cube centred on 0 and its faces (12, 3), as ``box`` makes them."""
+    mesh = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
+    return np.asarray(mesh.vertices), np.asarray(mesh.faces)
+
+
+def _boxes(centre: np.ndarray, size: np.ndarray | tuple, rotation: np.ndarray) -> Mesh:
+    """K boxes as one mesh: :func:`~guardrail_core.geom.mesh.box` for many boxes at once.
+
+    ``centre`` (K, 3) metres; ``size`` (K, 3) or (3,) metres along the columns of ``rotation``
+    (K, 3, 3) or (3, 3).
+    """
+    centre = np.asarray(centre, np.float64).reshape(-1, 3)
+    k = len(centre)
+    size = np.broadcast_to(np.asarray(size, np.float64), (k, 3))
+    rotation = np.broadcast_to(np.asarray(rotation, np.float64), (k, 3, 3))
+    unit, faces = _unit_box()
+    local = unit[None] * size[:, None, :]  # (K, 8, 3)
+    vertices = np.einsum("kvj,kij->kvi", local, rotation) + centre[:, None, :]
+    offsets = len(unit) * np.arange(k)[:, None, None]
+    return vertices.reshape(-1, 3), (faces[None] + offsets).reshape(-1, 3)
+
+
+def _segment_boxes(p0: np.ndarray, p1: np.ndarray, width: float, depth: float) -> Mesh:
+    """K bars of rectangular section ``width`` x ``depth`` (m) from ``p0`` to ``p1`` (K, 3), as
+    one mesh: :func:`~guardrail_core.geom.mesh.segment_box` (``up`` = z) for many bars at once
+    (a fence's hundreds of wires)."""
+    p0, p1 = np.asarray(p0, np.float64).reshape(-1, 3), np.asarray(p1, np.float64).reshape(-1, 3)
+    axis = p1 - p0
+    length = np.linalg.norm(axis, axis=1)
+    x = axis / length[:, None]
+    y = np.cross(_Z, x)
+    # Vertical bars: segment_box's fallback frame (perpendicular to x and to a helper axis).
+    vertical = np.linalg.norm(y, axis=1) < 1e-6
+    helper = np.where((np.abs(x[:, 2]) < 0.9)[:, None], _Z, np.array([1.0, 0.0, 0.0]))
+    y[vertical] = np.cross(x[vertical], helper[vertical])
+    y /= np.linalg.norm(y, axis=1, keepdims=True)
+    rotation = np.stack([x, y, np.cross(x, y)], axis=2)  # (K, 3, 3), columns x, y, z
+    size = np.stack([length, np.full_like(length, width), np.full_like(length, depth)], axis=1)
+    return _boxes((p0 + p1) / 2, size, rotation)
 
 
 def _prism(frame: _Frame, profile: np.ndarray, c0: float, c1: float) -> Mesh:
@@ -129,10 +174,11 @@ def _mesh_fence(f: _Frame, length, paint, add, rng) -> tuple[int, str | None, di
     for u in (bottom, height - 0.03):
         add(tube(f.at(np.array([0.0, length]), 0, u), frame_r, sections=10), cls, paint)
     # Wires span the whole length / height as single thin boxes: 12 faces each.
-    for a in np.arange(pitch / 2, length, pitch):
-        add(segment_box(f.at(a, 0, bottom), f.at(a, 0, height - 0.03), wire, wire), cls, paint)
-    for u in np.arange(bottom + pitch, height - 0.03, pitch):
-        add(segment_box(f.at(0.0, 0, u), f.at(length, 0, u), wire, wire), cls, paint)
+    uprights = np.arange(pitch / 2, length, pitch)
+    top = height - 0.03
+    add(_segment_boxes(f.at(uprights, 0, bottom), f.at(uprights, 0, top), wire, wire), cls, paint)
+    rows = np.arange(bottom + pitch, top, pitch)
+    add(_segment_boxes(f.at(0.0, 0, rows), f.at(length, 0, rows), wire, wire), cls, paint)
     geom = {
         "height": height,
         "post_radius": post_r,
@@ -160,8 +206,8 @@ def _bar_fence(f: _Frame, length, paint, add, rng) -> tuple[int, str | None, dic
     for u in (bottom, height - rail_h / 2):
         add(f.box(length / 2, 0.0, u, (length, rail_d, rail_h)), cls, paint)
     bars_a = np.arange(pitch / 2, length, pitch)
-    for a in bars_a:
-        add(f.box(a, 0.0, (bottom + height) / 2, (bar, bar, height - bottom)), cls, paint)
+    centres = f.at(bars_a, 0.0, (bottom + height) / 2)
+    add(_boxes(centres, (bar, bar, height - bottom), f.rotation), cls, paint)
     geom = {
         "height": height,
         "bar_pitch": pitch,

@@ -8,6 +8,7 @@ once what was hit.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -81,3 +82,19 @@ class MeshBuilder:
             face_object=np.concatenate(self._object),
             face_material=np.concatenate(self._material),
         )
+
+
+def join_meshes(meshes: Sequence[SceneMesh]) -> SceneMesh:
+    """One mesh of several, in order: faces renumbered, truth per face kept."""
+    if not meshes:
+        return MeshBuilder().build()
+    offsets = np.cumsum([0, *(len(m.vertices) for m in meshes[:-1])])
+    return SceneMesh(
+        vertices=np.concatenate([m.vertices for m in meshes]),
+        faces=np.concatenate([m.faces + o for m, o in zip(meshes, offsets, strict=True)]).astype(
+            np.int32
+        ),
+        face_class=np.concatenate([m.face_class for m in meshes]),
+        face_object=np.concatenate([m.face_object for m in meshes]),
+        face_material=np.concatenate([m.face_material for m in meshes]),
+    )

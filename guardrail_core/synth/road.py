@@ -127,11 +127,23 @@ class Road:
             grid = grid[:, ::-1]
         return grid_surface(grid)
 
-    def build_mesh(self, builder: MeshBuilder, *, step: float = 0.5) -> None:
-        """Add the carriageway, markings, curbs, sidewalks and verges to ``builder``."""
+    def mesh_rows(self, step: float = 0.5) -> np.ndarray:
+        """(R,) float64 metres: the stations of the rows of the road mesh, ``step`` apart at most."""
+        return np.linspace(0.0, self.length, max(2, int(np.ceil(self.length / step)) + 1))
+
+    def build_mesh(
+        self, builder: MeshBuilder, *, step: float = 0.5, rows: tuple[int, int] | None = None
+    ) -> None:
+        """Add the carriageway, markings, curbs, sidewalks and verges to ``builder``.
+
+        ``rows`` (first, last), inclusive, of :meth:`mesh_rows`: only that stretch of road (the
+        same triangles as the whole road's there); None: the whole road.
+        """
         spec = self.spec
         hw = self.half_width
-        s = np.linspace(0.0, self.length, max(2, int(np.ceil(self.length / step)) + 1))
+        s = self.mesh_rows(step)
+        if rows is not None:
+            s = s[rows[0] : rows[1] + 1]
         # Lane lines: solid edge lines and dashed lines between lanes.
         line_w = 0.15
         solid = [(-hw + 0.1, -hw + 0.1 + line_w), (hw - 0.1 - line_w, hw - 0.1)]

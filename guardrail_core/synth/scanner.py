@@ -8,7 +8,8 @@ returns drop out.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import dataclasses
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -17,6 +18,7 @@ from guardrail_core.params import StageParams, param
 from guardrail_core.sensors.scanner import ScannerParams
 from guardrail_core.sensors.trajectory import Trajectory
 from guardrail_core.synth.materials import MATERIAL_NAMES, MATERIALS
+from guardrail_core.synth.random_streams import child_rng, seed_sequence
 from guardrail_core.synth.raycast import SceneRaycaster
 
 _REFLECTIVITY = np.array([MATERIALS[name].reflectivity for name in MATERIAL_NAMES])
@@ -60,6 +62,23 @@ class Scan:
     rotation: np.ndarray
     phase: np.ndarray
     face: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.gps_time)
+
+    @classmethod
+    def concatenate(cls, parts: Sequence[Scan]) -> Scan:
+        """The returns of ``parts`` one after the other (an empty scan for none)."""
+        if not parts:
+            empty = np.zeros(0, np.int64)
+            return cls(np.zeros((0, 3)), np.zeros(0), empty.astype(np.uint16), empty, empty, empty)
+        return cls(
+            *(np.concatenate([getattr(p, f.name) for p in parts]) for f in dataclasses.fields(cls))
+        )
+
+    def take(self, index: np.ndarray) -> Scan:
+        """The returns at ``index`` (an array of indices or a mask)."""
+        return Scan(*(getattr(self, f.name)[index] for f in dataclasses.fields(self)))
 
 
 def measure_returns(
@@ -112,11 +131,52 @@ def measure_returns(
     return idx, xyz, intensity, face
 
 
+def rotation_chunks(
+    trajectory: Trajectory, scanner: ScannerParams, rotations_per_chunk: int = 100
+) -> np.ndarray:
+    """(C, 2) int64: the whole rotations ``[first, end)`` scanned from ``trajectory.time[0]`` to
+    ``trajectory.time[-1]``, cut every ``rotations_per_chunk`` rotations from the first."""
+    ppr = scanner.points_per_rotation
+    k_first = int(np.ceil((trajectory.time[0] - scanner.t0_s) * scanner.measurement_rate_hz - 1e-6))
+    k_last = int(
+        np.floor((trajectory.time[-1] - scanner.t0_s) * scanner.measurement_rate_hz + 1e-6)
+    )
+    r_first, r_last = -(-k_first // ppr), k_last // ppr  # whole rotations only
+    starts = np.arange(r_first, r_last, rotations_per_chunk, dtype=np.int64)
+    return np.stack([starts, np.minimum(starts + rotations_per_chunk, r_last)], axis=1)
+
+
+def scan_rotations(
+    raycaster: SceneRaycaster,
+    trajectory: Trajectory,
+    scanner: ScannerParams,
+    rotations: tuple[int, int],
+    rng: np.random.Generator,
+    *,
+    returns: ReturnModel = ReturnModel(),
+) -> Scan:
+    """Scan the rotations ``[first, end)`` (``scanner.t0_s`` is rotation 0's first pulse)."""
+    ppr = scanner.points_per_rotation
+    mount_r = scanner.T_vehicle_scanner[:3, :3]
+    mount_t = scanner.T_vehicle_scanner[:3, 3]
+    angles = 2 * np.pi * np.arange(ppr) / ppr
+    beam_scanner = np.stack([np.zeros(ppr), np.cos(angles), np.sin(angles)], axis=1)
+    beam_vehicle = beam_scanner @ mount_r.T
+    k = np.arange(int(rotations[0]) * ppr, int(rotations[1]) * ppr, dtype=np.int64)
+    t = scanner.t0_s + k / scanner.measurement_rate_hz
+    rot_wv, pos_wv = trajectory.poses(t)
+    phase = k % ppr
+    origin = pos_wv + rot_wv @ mount_t
+    direction = np.einsum("nij,nj->ni", rot_wv, beam_vehicle[phase])
+    idx, xyz, intensity, face = measure_returns(raycaster, origin, direction, scanner, returns, rng)
+    return Scan(xyz, t[idx], intensity, k[idx] // ppr, phase[idx], face)
+
+
 def scan(
     raycaster: SceneRaycaster,
     trajectory: Trajectory,
     scanner: ScannerParams,
-    rng: np.random.Generator,
+    rng: np.random.Generator | np.random.SeedSequence | int | None,
     *,
     returns: ReturnModel = ReturnModel(),
     rotations_per_chunk: int = 100,
@@ -124,44 +184,18 @@ def scan(
 ) -> Scan:
     """Scan the scene from ``trajectory.time[0]`` to ``trajectory.time[-1]``.
 
+    Chunk c of :func:`rotation_chunks` draws its noise and dropouts from child c of ``rng``'s
+    seed sequence (:func:`~guardrail_core.synth.random_streams.child_rng`), so a drive scanned
+    chunk by chunk (the simulator) draws exactly what one scanned whole does.
     ``progress`` is called with the number of rotations done after each chunk.
     """
-    ppr = scanner.points_per_rotation
-    k_first = int(np.ceil((trajectory.time[0] - scanner.t0_s) * scanner.measurement_rate_hz - 1e-6))
-    k_last = int(
-        np.floor((trajectory.time[-1] - scanner.t0_s) * scanner.measurement_rate_hz + 1e-6)
-    )
-    r_first, r_last = -(-k_first // ppr), k_last // ppr  # whole rotations only
-    mount_r = scanner.T_vehicle_scanner[:3, :3]
-    mount_t = scanner.T_vehicle_scanner[:3, 3]
-    angles = 2 * np.pi * np.arange(ppr) / ppr
-    beam_scanner = np.stack([np.zeros(ppr), np.cos(angles), np.sin(angles)], axis=1)
-    beam_vehicle = beam_scanner @ mount_r.T
-
-    parts: list[tuple[np.ndarray, ...]] = []
-    for r0 in range(r_first, r_last, rotations_per_chunk):
-        r1 = min(r0 + rotations_per_chunk, r_last)
-        k = np.arange(r0 * ppr, r1 * ppr, dtype=np.int64)
-        t = scanner.t0_s + k / scanner.measurement_rate_hz
-        rot_wv, pos_wv = trajectory.poses(t)
-        phase = k % ppr
-        origin = pos_wv + rot_wv @ mount_t
-        direction = np.einsum("nij,nj->ni", rot_wv, beam_vehicle[phase])
-        idx, xyz, intensity, face = measure_returns(
-            raycaster, origin, direction, scanner, returns, rng
+    sequence = seed_sequence(rng)
+    parts = []
+    for c, (r0, r1) in enumerate(rotation_chunks(trajectory, scanner, rotations_per_chunk)):
+        chunk_rng = child_rng(sequence, c)
+        parts.append(
+            scan_rotations(raycaster, trajectory, scanner, (r0, r1), chunk_rng, returns=returns)
         )
-        parts.append((xyz, t[idx], intensity, k[idx] // ppr, phase[idx], face))
         if progress is not None:
-            progress(r1 - r0)
-    if not parts:
-        empty = np.zeros(0)
-        return Scan(
-            np.zeros((0, 3)),
-            empty,
-            empty.astype(np.uint16),
-            empty.astype(np.int64),
-            empty.astype(np.int64),
-            empty.astype(np.int64),
-        )
-    cols = [np.concatenate(c) for c in zip(*parts, strict=True)]
-    return Scan(*cols)
+            progress(int(r1 - r0))
+    return Scan.concatenate(parts)

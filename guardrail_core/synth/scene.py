@@ -2,7 +2,9 @@
 
 A spec is a mapping with the keys ``road``, ``vehicle``, ``guardrails`` and ``objects`` (see
 ``docs/scene-spec.md`` and ``data_samples/scenes/``). :func:`random_scene_spec` writes one from a
-seed; :func:`build_scene` turns a spec into meshes and ``truth/objects.json`` records.
+seed; :func:`plan_scene` reads and checks one into parts (:mod:`.scene_parts`: stretches of road,
+guardrail runs, street objects) that :func:`build_scene` builds into meshes and
+``truth/objects.json`` records all at once, and the simulator a window of the drive at a time.
 """
 
 from __future__ import annotations
@@ -11,7 +13,6 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import yaml
@@ -27,13 +28,14 @@ from guardrail_core.sensors.scanner import (
     ScannerParams,
     scanner_mounting,
 )
-from guardrail_core.synth.confounders import CONFOUNDER_KINDS, build_confounder
+from guardrail_core.synth.confounders import CONFOUNDER_KINDS
 from guardrail_core.synth.designs import list_designs, load_design
-from guardrail_core.synth.guardrail import build_guardrail_run
 from guardrail_core.synth.materials import PAINTS
 from guardrail_core.synth.mesh import MeshBuilder, SceneMesh
 from guardrail_core.synth.multibeam import MultibeamParams
 from guardrail_core.synth.road import SIDES, Road, RoadSpec
+from guardrail_core.synth.scene_parts import ScenePart, guardrail_parts, object_parts, road_parts
+from guardrail_core.synth.spec_values import spec_value
 from guardrail_core.synth.vehicle import VehicleParams
 
 SCENES_DIR = Path(__file__).resolve().parents[2] / "data_samples" / "scenes"
@@ -98,46 +100,28 @@ def list_scenes() -> list[str]:
     return sorted(p.stem for p in SCENES_DIR.glob("*.yaml"))
 
 
-def _get(mapping: dict, key: str, kind: type, where: str, default: Any = ...) -> Any:
-    """``mapping[key]`` checked to be of ``kind`` (float accepts ints), or ``default``."""
-    if key not in mapping:
-        if default is ...:
-            raise SceneSpecError(f"{where}: missing key {key!r}")
-        return default
-    value = mapping[key]
-    if kind is float:
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise SceneSpecError(f"{where}.{key}: expected a number, got {value!r}")
-        return float(value)
-    if not isinstance(value, kind):
-        raise SceneSpecError(
-            f"{where}.{key}: expected {getattr(kind, '__name__', kind)}, got {value!r}"
-        )
-    return value
-
-
 def _road_spec(data: object) -> RoadSpec:
     where = "road"
     if not isinstance(data, dict):
         raise SceneSpecError("road: expected a mapping")
-    pieces = _get(data, "centreline", list, where)
+    pieces = spec_value(data, "centreline", list, where)
     segments = []
     for i, piece in enumerate(pieces):
         w = f"road.centreline[{i}]"
         if isinstance(piece, dict) and "straight" in piece:
-            length = _get(piece, "straight", float, w)
+            length = spec_value(piece, "straight", float, w)
             segments.append(("straight", length, 0.0))
         elif isinstance(piece, dict) and "arc" in piece:
-            arc = _get(piece, "arc", dict, w)
-            radius = _get(arc, "radius", float, w + ".arc")
+            arc = spec_value(piece, "arc", dict, w)
+            radius = spec_value(arc, "radius", float, w + ".arc")
             if radius < 20:
                 raise SceneSpecError(
                     f"{w}.arc.radius: {radius} m is tighter than any road (>= 20 m)"
                 )
             if "angle_deg" in arc:
-                angle = np.deg2rad(_get(arc, "angle_deg", float, w + ".arc"))
+                angle = np.deg2rad(spec_value(arc, "angle_deg", float, w + ".arc"))
             else:
-                angle = _get(arc, "length", float, w + ".arc") / radius
+                angle = spec_value(arc, "length", float, w + ".arc") / radius
             segments.append(("arc", abs(angle) * radius, float(np.sign(angle) / radius)))
         else:
             raise SceneSpecError(
@@ -147,39 +131,39 @@ def _road_spec(data: object) -> RoadSpec:
             raise SceneSpecError(f"{w}: length must be positive")
     if not segments:
         raise SceneSpecError("road.centreline: needs at least one piece")
-    curb = _get(data, "curb", dict, where, {})
-    sidewalk = _get(data, "sidewalk", dict, where, {})
-    lanes = int(_get(data, "lanes", int, where, 2))
+    curb = spec_value(data, "curb", dict, where, {})
+    sidewalk = spec_value(data, "sidewalk", dict, where, {})
+    lanes = int(spec_value(data, "lanes", int, where, 2))
     if lanes < 1:
         raise SceneSpecError("road.lanes: at least one lane")
     return RoadSpec(
         segments=tuple(segments),
-        heading_deg=_get(data, "heading_deg", float, where, 0.0),
+        heading_deg=spec_value(data, "heading_deg", float, where, 0.0),
         lanes=lanes,
-        lane_width=_get(data, "lane_width", float, where, 3.25),
-        crown_slope=_get(data, "crown_percent", float, where, 2.0) / 100,
-        grade=_get(data, "grade_percent", float, where, 1.0) / 100,
-        undulation_m=_get(data, "undulation_m", float, where, 0.3),
-        curb_height=_get(curb, "height", float, "road.curb", 0.15),
-        curb_width=_get(curb, "width", float, "road.curb", 0.18),
-        sidewalk_left=_get(sidewalk, "left", float, "road.sidewalk", 2.5),
-        sidewalk_right=_get(sidewalk, "right", float, "road.sidewalk", 2.5),
-        verge=_get(data, "verge", float, where, 6.0),
+        lane_width=spec_value(data, "lane_width", float, where, 3.25),
+        crown_slope=spec_value(data, "crown_percent", float, where, 2.0) / 100,
+        grade=spec_value(data, "grade_percent", float, where, 1.0) / 100,
+        undulation_m=spec_value(data, "undulation_m", float, where, 0.3),
+        curb_height=spec_value(curb, "height", float, "road.curb", 0.15),
+        curb_width=spec_value(curb, "width", float, "road.curb", 0.18),
+        sidewalk_left=spec_value(sidewalk, "left", float, "road.sidewalk", 2.5),
+        sidewalk_right=spec_value(sidewalk, "right", float, "road.sidewalk", 2.5),
+        verge=spec_value(data, "verge", float, where, 6.0),
     )
 
 
 def _vehicle(data: dict, road: Road) -> tuple[VehicleParams, tuple[float, float]]:
     where = "vehicle"
-    speed = _get(data, "speed_mps", list, where, [8.0, 12.0])
+    speed = spec_value(data, "speed_mps", list, where, [8.0, 12.0])
     if len(speed) != 2 or not 1.0 <= float(speed[0]) <= float(speed[1]) <= 40.0:
         raise SceneSpecError(
             f"vehicle.speed_mps: expected [min, max] within 1..40 m/s, got {speed}"
         )
-    lane = int(_get(data, "lane", int, where, 0))
+    lane = int(spec_value(data, "lane", int, where, 0))
     if not 0 <= lane < road.spec.lanes:
         raise SceneSpecError(f"vehicle.lane: {lane} is not a lane of a {road.spec.lanes}-lane road")
-    start = _get(data, "start", float, where, min(20.0, road.length / 4))
-    end = _get(data, "end", float, where, road.length - min(20.0, road.length / 4))
+    start = spec_value(data, "start", float, where, min(20.0, road.length / 4))
+    end = spec_value(data, "end", float, where, road.length - min(20.0, road.length / 4))
     if not 0 <= start < end <= road.length:
         raise SceneSpecError(
             f"vehicle: start {start} and end {end} must lie on the road (0..{road.length:.1f} m)"
@@ -201,10 +185,10 @@ def _scanner(
     if not isinstance(data, dict):
         raise SceneSpecError("scanner: expected a mapping")
     where = "scanner"
-    kind = _get(data, "kind", str, where, PROFILE)
+    kind = spec_value(data, "kind", str, where, PROFILE)
     if kind == MULTIBEAM:
-        frame_every = _get(data, "frame_every_m", float, where, MultibeamParams.frame_every_m)
-        height = _get(data, "height_m", float, where, MULTIBEAM_HEIGHT_M)
+        frame_every = spec_value(data, "frame_every_m", float, where, MultibeamParams.frame_every_m)
+        height = spec_value(data, "height_m", float, where, MULTIBEAM_HEIGHT_M)
         if not frame_every > 0 or not height > 0:
             raise SceneSpecError(
                 f"scanner: frame_every_m and height_m must be positive, got {frame_every} and "
@@ -216,9 +200,9 @@ def _scanner(
             scanner = ScannerParams(
                 rotation_rate_hz=10.0,
                 measurement_rate_hz=10.0 * AZIMUTH_BINS,
-                range_noise_m=_get(data, "range_noise_m", float, where, 0.02),
+                range_noise_m=spec_value(data, "range_noise_m", float, where, 0.02),
                 min_range_m=2.5,  # the car's own body
-                max_range_m=_get(data, "max_range_m", float, where, 120.0),
+                max_range_m=spec_value(data, "max_range_m", float, where, 120.0),
                 T_vehicle_scanner=mount,
                 kind=MULTIBEAM,
                 rings=len(params.elevations_deg),
@@ -228,8 +212,10 @@ def _scanner(
         return scanner, params
     if kind != PROFILE:
         raise SceneSpecError(f"scanner.kind: expected {PROFILE} or {MULTIBEAM}, got {kind!r}")
-    mount = _get(data, "mounting", dict, where, {})
-    position = _get(mount, "position_m", list, "scanner.mounting", list(DEFAULT_MOUNT_POSITION_M))
+    mount = spec_value(data, "mounting", dict, where, {})
+    position = spec_value(
+        mount, "position_m", list, "scanner.mounting", list(DEFAULT_MOUNT_POSITION_M)
+    )
     if len(position) != 3 or not all(isinstance(v, int | float) for v in position):
         raise SceneSpecError(
             f"scanner.mounting.position_m: expected [x, y, z] metres, got {position}"
@@ -239,159 +225,105 @@ def _scanner(
     data = {ScannerParams.renamed.get(key, key): value for key, value in data.items()}
     try:
         return ScannerParams(
-            rotation_rate_hz=_get(
+            rotation_rate_hz=spec_value(
                 data, "rotation_rate_hz", float, where, defaults.rotation_rate_hz
             ),
-            measurement_rate_hz=_get(
+            measurement_rate_hz=spec_value(
                 data, "measurement_rate_hz", float, where, defaults.measurement_rate_hz
             ),
-            range_noise_m=_get(data, "range_noise_m", float, where, defaults.range_noise_m),
-            max_range_m=_get(data, "max_range_m", float, where, defaults.max_range_m),
+            range_noise_m=spec_value(data, "range_noise_m", float, where, defaults.range_noise_m),
+            max_range_m=spec_value(data, "max_range_m", float, where, defaults.max_range_m),
             T_vehicle_scanner=scanner_mounting(
                 (float(position[0]), float(position[1]), float(position[2])),
-                roll_deg=_get(
+                roll_deg=spec_value(
                     mount, "roll_deg", float, "scanner.mounting", DEFAULT_MOUNT_RPY_DEG[0]
                 ),
-                pitch_deg=_get(
+                pitch_deg=spec_value(
                     mount, "pitch_deg", float, "scanner.mounting", DEFAULT_MOUNT_RPY_DEG[1]
                 ),
-                yaw_deg=_get(mount, "yaw_deg", float, "scanner.mounting", DEFAULT_MOUNT_RPY_DEG[2]),
+                yaw_deg=spec_value(
+                    mount, "yaw_deg", float, "scanner.mounting", DEFAULT_MOUNT_RPY_DEG[2]
+                ),
             ),
         ), None
     except ParameterError as exc:
         raise SceneSpecError(f"scanner: {exc}") from exc
 
 
-def _side(item: dict, where: str) -> str:
-    side = _get(item, "side", str, where)
-    if side not in SIDES:
-        raise SceneSpecError(f"{where}.side: expected left or right, got {side!r}")
-    return side
-
-
-def _paint(item: dict, where: str, rng: np.random.Generator) -> str:
-    paint = _get(item, "paint", str, where, str(rng.choice(list(PAINTS))))
-    if paint not in PAINTS:
-        raise SceneSpecError(f"{where}.paint: unknown paint {paint!r} (known: {', '.join(PAINTS)})")
-    return paint
-
-
 # ----------------------------------------------------------------------------- building
 
 
-def build_scene(spec: dict, *, seed: int = 0) -> Scene:
-    """Build meshes and truth from a scene spec.
+@dataclass(frozen=True)
+class SceneLayout:
+    """A scene spec read and checked, its meshes not yet built: the parts to build them from.
 
-    ``seed`` drives what the spec leaves open (paints not given, tree and car shapes).
+    Attributes
+    ----------
+    spec, road, vehicle, scanner, multibeam, drive_span, crs, origin : as in :class:`Scene`
+    parts : the road in stretches, then the guardrail runs and street objects in object-id order
+        (:mod:`~guardrail_core.synth.scene_parts`)
+    """
+
+    spec: dict
+    road: Road
+    vehicle: VehicleParams
+    scanner: ScannerParams
+    drive_span: tuple[float, float]
+    parts: tuple[ScenePart, ...]
+    crs: str
+    origin: np.ndarray
+    multibeam: MultibeamParams | None = None
+
+
+def plan_scene(spec: dict, *, seed: int = 0) -> SceneLayout:
+    """Read and check a scene spec; its parts are built later, all at once (:func:`build_scene`)
+    or a stretch at a time (:class:`~guardrail_core.synth.scene_window.SceneWindows`).
+
+    ``seed`` drives what the spec leaves open (paints not given, tree and car shapes), each
+    object from its own stream, so a part is the same whichever parts are built with it.
     """
     if not isinstance(spec, dict):
         raise SceneSpecError("a scene spec is a mapping with road, vehicle, guardrails, objects")
-    rng = np.random.default_rng(seed)
     road = Road(_road_spec(spec.get("road")))
     vehicle, span = _vehicle(spec.get("vehicle") or {}, road)
     scanner, multibeam = _scanner(spec.get("scanner") or {}, vehicle.reference_height_m)
-    builder = MeshBuilder()
-    road.build_mesh(builder)
-    objects: list[dict] = []
-    next_id = 1
-    for i, item in enumerate(spec.get("guardrails") or []):
-        where = f"guardrails[{i}]"
-        if not isinstance(item, dict):
-            raise SceneSpecError(f"{where}: expected a mapping")
-        design = load_design(_get(item, "design", str, where))
-        side = _side(item, where)
-        start = _get(item, "start", float, where)
-        length = _get(item, "length", float, where)
-        spacing = _get(item, "pole_spacing", float, where, design.unit_length)
-        offset = _get(item, "offset", float, where, 0.35)
-        if spacing <= 0.3 or length < spacing:
-            raise SceneSpecError(
-                f"{where}: length {length} m must hold at least one pole spacing {spacing} m"
-            )
-        if start < 0 or start + length > road.length:
-            raise SceneSpecError(
-                f"{where}: {start}..{start + length} m runs off the road (0..{road.length:.1f} m)"
-            )
-        poles, toward_road = _poles_along(road, side, offset, start, length, spacing)
-        record = build_guardrail_run(
-            design,
-            poles,
-            toward_road,
-            paint=_paint(item, where, rng),
-            object_id=next_id,
-            builder=builder,
-        )
-        record.update({"side": side, "offset": offset, "start": start, "pole_spacing": spacing})
-        objects.append(record)
-        next_id += 1
-    for i, item in enumerate(spec.get("objects") or []):
-        where = f"objects[{i}]"
-        if not isinstance(item, dict):
-            raise SceneSpecError(f"{where}: expected a mapping")
-        kind = _get(item, "kind", str, where)
-        if kind not in CONFOUNDER_KINDS:
-            raise SceneSpecError(
-                f"{where}.kind: unknown kind {kind!r} (known: {', '.join(CONFOUNDER_KINDS)})"
-            )
-        side = _side(item, where)
-        offset = _get(item, "offset", float, where, 1.0)
-        at = item.get("at")
-        positions = at if isinstance(at, list) else [at]
-        for j, s in enumerate(positions):
-            if isinstance(s, bool) or not isinstance(s, int | float) or not 0 <= s <= road.length:
-                raise SceneSpecError(
-                    f"{where}.at: {s!r} is not a position on the road (0..{road.length:.1f} m)"
-                )
-            lateral = road.lateral_of(side, offset)
-            base = road.point(np.array([s]), np.array([lateral]))[0]
-            _, tangent, left = road.frame(np.array([s]))
-            record = build_confounder(
-                kind,
-                base=base,
-                along=tangent[0],
-                toward_road=-SIDES[side] * left[0],
-                length=float(item.get("length", 0.0)),
-                paint=_paint(item, where, rng),
-                object_id=next_id,
-                builder=builder,
-                rng=rng,
-            )
-            record.update({"side": side, "offset": offset, "at": float(s), "index": j})
-            objects.append(record)
-            next_id += 1
+    rails = guardrail_parts(list(spec.get("guardrails") or []), road, seed, first_id=1)
+    objects = object_parts(list(spec.get("objects") or []), road, seed, first_id=1 + len(rails))
     origin = np.asarray(spec.get("origin", DEFAULT_ORIGIN), np.float64)
     if origin.shape != (3,) or not np.all(np.isfinite(origin)):
         raise SceneSpecError(
             f"origin: expected three finite map coordinates, got {spec.get('origin')}"
         )
-    return Scene(
+    return SceneLayout(
         spec=spec,
         road=road,
         vehicle=vehicle,
         scanner=scanner,
         drive_span=span,
-        mesh=builder.build(),
-        objects=objects,
+        parts=(*road_parts(road), *rails, *objects),
         crs=str(spec.get("crs", DEFAULT_CRS)),
         origin=origin,
         multibeam=multibeam,
     )
 
 
-def _poles_along(
-    road: Road, side: str, offset: float, start: float, length: float, spacing: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """Pole ground points (P, 3) every ``spacing`` metres along the offset line, and toward-road units."""
-    lateral = road.lateral_of(side, offset)
-    s = np.arange(start, min(start + length * 1.3 + 1.0, road.length), 0.02)
-    line = road.point(s, np.full_like(s, lateral))
-    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(line[:, :2], axis=0), axis=1))])
-    n_units = int(np.floor(min(length, arc[-1]) / spacing + 1e-9))
-    at = np.arange(n_units + 1) * spacing
-    s_poles = np.interp(at, arc, s)
-    poles = road.point(s_poles, np.full_like(s_poles, lateral))
-    _, _, left = road.frame(s_poles)
-    return poles, -SIDES[side] * left
+def build_scene(spec: dict, *, seed: int = 0) -> Scene:
+    """Build the whole scene's meshes and truth from a scene spec (see :func:`plan_scene`)."""
+    layout = plan_scene(spec, seed=seed)
+    builder = MeshBuilder()
+    objects = [record for part in layout.parts if (record := part.build(builder)) is not None]
+    return Scene(
+        spec=spec,
+        road=layout.road,
+        vehicle=layout.vehicle,
+        scanner=layout.scanner,
+        drive_span=layout.drive_span,
+        mesh=builder.build(),
+        objects=objects,
+        crs=layout.crs,
+        origin=layout.origin,
+        multibeam=layout.multibeam,
+    )
 
 
 # ----------------------------------------------------------------------------- random scenes
@@ -442,6 +374,8 @@ def random_scene_spec(seed: int, length: float, designs: Sequence[str] | None = 
     done = 0.0
     while done < total:
         piece = float(min(rng.uniform(25, 70), total - done))
+        if round(piece, 2) <= 0:  # an arc's rounding left less than a centimetre: done
+            break
         if rng.random() < 0.45 and piece > 15:
             radius = float(rng.uniform(90, 400))
             angle = float(np.rad2deg(piece / radius) * rng.choice([-1, 1]))

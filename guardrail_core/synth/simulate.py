@@ -1,45 +1,49 @@
-"""Simulate a whole drive: scene, vehicle motion, scanner, cameras, truth, written as a drive folder."""
+"""Simulate a whole drive: scene, vehicle motion, scanner, cameras, truth, written as a drive folder.
+
+Memory does not grow with the drive's length: the scene is built a window of driving at a time
+(:mod:`.scene_window`), the scan runs in chunks of scan time (:mod:`.scan_plan`) whose points go
+straight into the drive's tiles (:class:`~guardrail_core.formats.drive_tiles.TiledPointWriter`),
+and images are written as they are rendered.
+"""
 
 from __future__ import annotations
 
 import dataclasses
 import os
 import time
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
-import cv2
 import numpy as np
 import yaml
 from tqdm import tqdm
 
+from guardrail_core.classes import TruthClass
 from guardrail_core.errors import InvalidOptionError, MissingDriveFileError
 from guardrail_core.formats.atomic import staged_folder
-from guardrail_core.formats.drive import (
-    Drive,
-    ImageRecord,
-    PointCloud,
-    Truth,
-    write_drive_files,
-)
-from guardrail_core.sensors.camera import Camera
-from guardrail_core.sensors.trajectory import Trajectory
-from guardrail_core.synth.camera_render import random_lighting, render_image
+from guardrail_core.formats.drive import Drive, write_drive_metadata
+from guardrail_core.formats.drive_tiles import DEFAULT_DRIVE_TILE_M, TiledPointWriter
 from guardrail_core.synth.camera_rig import default_camera_rig
+from guardrail_core.synth.camera_shots import ShotWriter, shot_times
 from guardrail_core.synth.designs import DESIGNS_DIR
-from guardrail_core.synth.multibeam import scan_frames
+from guardrail_core.synth.mesh import SceneMesh
 from guardrail_core.synth.raycast import SceneRaycaster
-from guardrail_core.synth.scanner import scan
-from guardrail_core.synth.scene import SCENES_DIR, Scene, build_scene
+from guardrail_core.synth.scan_plan import plan_scan
+from guardrail_core.synth.scanner import Scan
+from guardrail_core.synth.scene import SCENES_DIR, Scene, build_scene, plan_scene
+from guardrail_core.synth.scene_window import SceneWindows, drive_windows, window_positions
 from guardrail_core.synth.vehicle import drive_along
 
-SIMULATOR_VERSION = "1"
+#: 2: the scene is built per object stream and the scan drawn per chunk of scan time, so that
+#: long drives are simulated in windows and tiles; drives differ from version 1's for a seed.
+SIMULATOR_VERSION = "2"
 
 
 @dataclass(frozen=True)
 class SimulationOptions:
-    """What the simulated vehicle records besides the scene.
+    """What the simulated vehicle records besides the scene, and how the work is cut up.
 
     Attributes
     ----------
@@ -47,12 +51,16 @@ class SimulationOptions:
     image_size : (width, height) pixels of every camera
     jpeg_quality : int, 0-100
     compress : bool, LAZ (True) or LAS (False)
+    scene_window_m : float, metres of driving scanned against one build of the scene near them
+        (memory against rebuilding: a window holds the scene within the scanner's range, 120 m,
+        of it; the points do not depend on it)
     """
 
     image_every_m: float = 5.0
     image_size: tuple[int, int] = (1024, 768)
     jpeg_quality: int = 92
     compress: bool = True
+    scene_window_m: float = 200.0
 
     def __post_init__(self) -> None:
         width, height = self.image_size
@@ -64,11 +72,19 @@ class SimulationOptions:
             )
         if not 0 <= self.jpeg_quality <= 100:
             raise InvalidOptionError(f"JPEG quality lies in 0..100, got {self.jpeg_quality}")
+        if not self.scene_window_m > 0:
+            raise InvalidOptionError(
+                f"scene windows must be longer than 0 m, got {self.scene_window_m}"
+            )
 
 
 @dataclass(frozen=True)
 class SimulationSummary:
-    """What a simulation wrote, and how long each stage took (seconds)."""
+    """What a simulation wrote, and how long each stage took (seconds).
+
+    ``points_by_class`` counts the points of each :class:`~guardrail_core.classes.TruthClass`
+    (those with any); ``n_tiles`` the point tiles written.
+    """
 
     out: Path
     n_points: int
@@ -76,6 +92,8 @@ class SimulationSummary:
     length_m: float
     duration_s: float
     seconds: dict[str, float]
+    n_tiles: int = 1
+    points_by_class: dict[int, int] = dataclasses.field(default_factory=dict)
 
 
 def simulate_drive(
@@ -87,115 +105,161 @@ def simulate_drive(
     overwrite: bool = False,
     inputs: Iterable[str | os.PathLike] = (),
     progress: bool = True,
+    tile_m: float | None = DEFAULT_DRIVE_TILE_M,
 ) -> SimulationSummary:
     """Simulate a drive through the scene of ``spec`` and write it to the folder ``out``.
 
-    The same spec, seed and options give the same drive, byte for byte in points and truth.
+    The points are written in tiles of ``tile_m`` metres of driving (None: one tile) as they are
+    scanned. The same spec, seed and options give the same drive, byte for byte in points and
+    truth once the tiles are put together, whatever ``tile_m``.
     The folder is written beside ``out`` and renamed at the end
     (:func:`guardrail_core.formats.atomic.staged_folder`): an error leaves nothing behind.
     ``inputs`` are the files the spec came from (the scene YAML); ``out`` must not be, hold or
     replace one of them, nor the shipped scenes and designs
     (:class:`~guardrail_core.errors.InputInsideOutputError`, before any work).
     """
+    if tile_m is not None and not tile_m > 0:
+        raise InvalidOptionError(f"tiles must be longer than 0 m, got {tile_m}")
     out = Path(out)
-    seconds: dict[str, float] = {}
-    clock = time.perf_counter()
+    seconds = dict.fromkeys(("scene", "scanner", "cameras", "write"), 0.0)
     scene_seq, motion_seq, scan_seq, camera_seq = np.random.SeedSequence(seed).spawn(4)
     # The shipped scenes and designs are inputs of every simulation.
     sources = [*inputs, SCENES_DIR, DESIGNS_DIR]
     with staged_folder(out, overwrite=overwrite, inputs=sources) as staging:
-        scene = build_scene(spec, seed=_scene_seed(scene_seq))
-        seconds["scene"] = time.perf_counter() - clock
-
-        clock = time.perf_counter()
-        t0 = 345_600.0 + 60.0 * (seed % 1000)  # GPS seconds of the week: Thursday, after 00:00
-        trajectory = drive_along(
-            scene.road,
-            scene.vehicle,
-            s_start=scene.drive_span[0],
-            s_end=scene.drive_span[1],
-            t0=t0,
-            rng=np.random.default_rng(motion_seq),
-        )
-        scanner = dataclasses.replace(scene.scanner, t0_s=float(trajectory.time[0]))
-        raycaster = SceneRaycaster(scene.mesh)
-        if scene.multibeam is not None:
-            with tqdm(desc="scanning", unit="frame", disable=not progress, leave=False) as bar:
-                result = scan_frames(
-                    raycaster,
-                    trajectory,
-                    scanner,
-                    scene.multibeam,
-                    np.random.default_rng(scan_seq),
-                    progress=bar.update,
-                )
-        else:
-            n_rot = int((trajectory.time[-1] - trajectory.time[0]) * scanner.rotation_rate_hz)
+        with _timed(seconds, "scene"):
+            layout = plan_scene(spec, seed=_scene_seed(scene_seq))
+            t0 = 345_600.0 + 60.0 * (seed % 1000)  # GPS seconds of the week: Thursday, 00:00+
+            trajectory = drive_along(
+                layout.road,
+                layout.vehicle,
+                s_start=layout.drive_span[0],
+                s_end=layout.drive_span[1],
+                t0=t0,
+                rng=np.random.default_rng(motion_seq),
+            )
+            scanner = dataclasses.replace(layout.scanner, t0_s=float(trajectory.time[0]))
+            # A part is needed while the scanner (or a camera, about as far from the vehicle's
+            # origin) may reach it.
+            reach = scanner.max_range_m + float(np.linalg.norm(scanner.T_vehicle_scanner[:3, 3]))
             with tqdm(
-                total=n_rot, desc="scanning", unit="rot", disable=not progress, leave=False
+                total=len(layout.parts),
+                desc="scene",
+                unit="part",
+                disable=not progress,
+                leave=False,
             ) as bar:
-                result = scan(
-                    raycaster,
-                    trajectory,
-                    scanner,
-                    np.random.default_rng(scan_seq),
-                    progress=bar.update,
-                )
-        points = PointCloud(
-            result.xyz, result.gps_time, result.intensity, result.rotation, result.phase
-        )
-        seconds["scanner"] = time.perf_counter() - clock
+                scene = SceneWindows(layout.parts, reach + 1.0, progress=bar.update)
 
-        clock = time.perf_counter()
+        plan = plan_scan(trajectory, scanner, layout.multibeam, scan_seq)
         cameras = default_camera_rig(width=options.image_size[0], height=options.image_size[1])
-        images = _shoot(
-            raycaster,
-            trajectory,
-            cameras,
-            options,
-            staging,
-            np.random.default_rng(camera_seq),
-            progress,
+        shots = shot_times(trajectory, options.image_every_m)
+        shooter = ShotWriter(
+            cameras, staging, np.random.default_rng(camera_seq), options.jpeg_quality
         )
-        seconds["cameras"] = time.perf_counter() - clock
-
-        clock = time.perf_counter()
-        truth = Truth(
-            point_class=scene.mesh.face_class[result.face],
-            point_object=scene.mesh.face_object[result.face],
-            objects=scene.objects,
-            mask_files={},
-        )
-        source = {
-            "simulator": SIMULATOR_VERSION,
-            "seed": seed,
-            "scene": scene.spec.get("name", "scene"),
-            "image_every_m": options.image_every_m,
-        }
-        write_drive_files(
+        writer = TiledPointWriter(
             staging,
-            crs=scene.crs,
-            origin=scene.origin,
-            scanner=scanner,
+            origin=layout.origin,
             trajectory=trajectory,
-            points=points,
-            cameras=cameras,
-            images=images,
-            truth=truth,
-            source=source,
+            tile_m=tile_m,
             compress=options.compress,
+            with_truth=True,
         )
-        (staging / "truth" / "scene.yaml").write_text(yaml.safe_dump(scene.spec, sort_keys=False))
-        seconds["write"] = time.perf_counter() - clock
+        counts = np.zeros(len(TruthClass), np.int64)
+        next_shot = 0
+        with (
+            tqdm(
+                total=int(plan.units.sum()),
+                desc="scanning",
+                unit=plan.unit,
+                disable=not progress,
+                leave=False,
+                position=0,
+            ) as scan_bar,
+            tqdm(
+                total=len(shots) * len(cameras),
+                desc="cameras",
+                unit="img",
+                disable=not progress,
+                leave=False,
+                position=1,
+            ) as camera_bar,
+        ):
+            for window in drive_windows(trajectory, plan.spans, options.scene_window_m):
+                with _timed(seconds, "scene"):
+                    positions, gap = window_positions(trajectory, window.span)
+                    mesh = scene.mesh_near(positions, slack_m=gap / 2)
+                    raycaster = SceneRaycaster(mesh)
+                for c in window.chunks:
+                    with _timed(seconds, "scanner"):
+                        result = plan.scan_chunk(raycaster, c)
+                    with _timed(seconds, "write"):
+                        counts += _append(writer, result, mesh)
+                    scan_bar.update(int(plan.units[c]))
+                with _timed(seconds, "cameras"):
+                    end = int(np.searchsorted(shots, window.shots_before, side="left"))
+                    shooter.shoot(raycaster, trajectory, shots[next_shot:end], camera_bar.update)
+                    next_shot = end
+                del raycaster, mesh  # before the next window's scene is built
+
+        with _timed(seconds, "write"):
+            index = writer.close()
+            write_drive_metadata(
+                staging,
+                crs=layout.crs,
+                origin=layout.origin,
+                scanner=scanner,
+                trajectory=trajectory,
+                cameras=cameras,
+                images=shooter.records,
+                objects=scene.objects,
+                source={
+                    "simulator": SIMULATOR_VERSION,
+                    "seed": seed,
+                    "scene": layout.spec.get("name", "scene"),
+                    "image_every_m": options.image_every_m,
+                },
+            )
+            (staging / "truth" / "scene.yaml").write_text(
+                yaml.safe_dump(layout.spec, sort_keys=False)
+            )
     length = float(np.sum(np.linalg.norm(np.diff(trajectory.position, axis=0), axis=1)))
     return SimulationSummary(
         out=out,
-        n_points=len(points),
-        n_images=len(images),
+        n_points=int(counts.sum()),
+        n_images=len(shooter.records),
         length_m=length,
         duration_s=float(trajectory.time[-1] - trajectory.time[0]),
         seconds=seconds,
+        n_tiles=len(index),
+        points_by_class={i: int(n) for i, n in enumerate(counts) if n},
     )
+
+
+@contextmanager
+def _timed(seconds: dict[str, float], stage: str) -> Iterator[None]:
+    """Add the seconds the enclosed block takes to ``seconds[stage]``."""
+    start = time.perf_counter()
+    try:
+        yield
+    finally:
+        seconds[stage] += time.perf_counter() - start
+
+
+def _append(writer: TiledPointWriter, result: Scan, mesh: SceneMesh) -> np.ndarray:
+    """Write a chunk's returns with their truth (from the faces they hit in ``mesh``); return its
+    count of points (T,) per :class:`~guardrail_core.classes.TruthClass`."""
+    point_class = mesh.face_class[result.face]
+    # The LAS file's own types: the points a tile holds until it is written take less memory.
+    writer.append(
+        result.xyz,
+        result.gps_time,
+        result.intensity,
+        result.rotation.astype(np.uint32),
+        result.phase.astype(np.uint16),
+        point_class,
+        mesh.face_object[result.face],
+    )
+    return np.bincount(point_class, minlength=len(TruthClass))[: len(TruthClass)]
 
 
 def _scene_seed(sequence: np.random.SeedSequence) -> int:
@@ -211,54 +275,3 @@ def rebuild_scene(drive: Drive) -> Scene:
         )
     scene_seq = np.random.SeedSequence(int(drive.source["seed"])).spawn(4)[0]
     return build_scene(yaml.safe_load(path.read_text()), seed=_scene_seed(scene_seq))
-
-
-def _shoot(
-    raycaster: SceneRaycaster,
-    trajectory: Trajectory,
-    cameras: list[Camera],
-    options: SimulationOptions,
-    folder: Path,
-    rng: np.random.Generator,
-    progress: bool,
-) -> list[ImageRecord]:
-    """Fire every camera each ``image_every_m`` metres; write images and truth masks."""
-    travelled = np.concatenate(
-        [[0.0], np.cumsum(np.linalg.norm(np.diff(trajectory.position, axis=0), axis=1))]
-    )
-    marks = np.arange(options.image_every_m / 2, travelled[-1], options.image_every_m)
-    shot_times = np.interp(marks, travelled, trajectory.time)
-    lighting = random_lighting(rng)  # one sun for the whole drive; exposure varies per shot
-    rays = {camera.name: camera.pixel_rays() for camera in cameras}
-    records = []
-    with tqdm(
-        total=len(shot_times) * len(cameras),
-        desc="cameras",
-        unit="img",
-        disable=not progress,
-        leave=False,
-    ) as bar:
-        for n, t in enumerate(shot_times):
-            T_world_vehicle = trajectory.T_world_vehicle(float(t))
-            for camera in cameras:
-                T_world_camera = T_world_vehicle @ camera.T_vehicle_camera
-                shot_light = dataclasses.replace(
-                    lighting, exposure=lighting.exposure * float(rng.uniform(0.85, 1.15))
-                )
-                image, mask = render_image(
-                    raycaster, camera, T_world_camera, shot_light, rng, pixel_rays=rays[camera.name]
-                )
-                name = f"{n:06d}"
-                image_file = Path("images") / camera.name / f"{name}.jpg"
-                mask_file = Path("truth") / "masks" / camera.name / f"{name}.png"
-                (folder / image_file).parent.mkdir(parents=True, exist_ok=True)
-                (folder / mask_file).parent.mkdir(parents=True, exist_ok=True)
-                cv2.imwrite(
-                    str(folder / image_file),
-                    image[:, :, ::-1],
-                    [cv2.IMWRITE_JPEG_QUALITY, options.jpeg_quality],
-                )
-                cv2.imwrite(str(folder / mask_file), mask)
-                records.append(ImageRecord(str(image_file), camera.name, float(t), T_world_camera))
-                bar.update()
-    return records
