@@ -99,7 +99,7 @@ def dask_client(spec: ClusterSpec) -> Iterator[Any]:
         threads_per_worker=1,
         processes=True,
         memory_limit=spec.memory_limit,
-        dashboard_address=None,
+        dashboard_address=":0",  # a free port: never a clash with another cluster
         silence_logs=logging.ERROR,
     )
     client = Client(cluster)
@@ -128,6 +128,7 @@ def map_tasks(
     progress: bool,
     points: Callable[[R], int] | None = None,
     failures: tuple[type[BaseException], ...] = (),
+    scatter: bool = False,
 ) -> list[R | TaskFailure[T]]:
     """``function`` over ``items`` on the cluster (or here, without a client), in the order of
     ``items``, with a progress bar (tasks done / total, and points/s where ``points`` counts
@@ -135,7 +136,8 @@ def map_tasks(
 
     A task that raises one of ``failures``, or whose workers kept dying (Dask's
     ``KilledWorker``, after its retries), becomes a :class:`TaskFailure` and the other tasks go
-    on; any other exception is a defect and propagates.
+    on; any other exception is a defect and propagates. ``scatter``: the items hold arrays;
+    send them to the workers as data first rather than inside the task graph.
     """
     results: list[R | TaskFailure[T] | None] = [None] * len(items)
     done_points = 0
@@ -163,7 +165,8 @@ def map_tasks(
             from dask.distributed import as_completed
             from distributed.scheduler import KilledWorker
 
-            futures = client.map(function, list(items), pure=False)
+            inputs = client.scatter(list(items)) if scatter else list(items)
+            futures = client.map(function, inputs, pure=False)
             position = {future.key: i for i, future in enumerate(futures)}
             for future in as_completed(futures):
                 i = position[future.key]

@@ -177,7 +177,7 @@ def test_a_local_cluster_run_equals_the_in_process_run_and_survives_a_killed_wor
     from dask.distributed import Client, LocalCluster
 
     with (
-        LocalCluster(n_workers=2, threads_per_worker=1, dashboard_address=None) as cluster,
+        LocalCluster(n_workers=2, threads_per_worker=1, dashboard_address=":0") as cluster,
         Client(cluster) as client,
     ):
         killed: list[int] = []

@@ -354,6 +354,7 @@ def _process(
                     desc="reconstruct",
                     unit="run",
                     progress=progress,
+                    scatter=True,
                 )
                 models = []
                 for r in results_runs:

@@ -200,24 +200,17 @@ def process_window(
     segments, choice = result.segments, result.choice
     ok = np.flatnonzero(choice.status == CROP_OK)
     with timer.stage("classify", points=len(segments)):
-        # Shape first: the CNN sees only the crops whose segment's shape leaves the label open
-        # (the label is then the same whatever the crop shows: SegmentHead.proba_range).
-        decided = model.shape_decides(result.features)
-        ask = ok[~decided[ok]]
         crop_probability = np.full(len(segments), np.nan, np.float64)
         embeddings = None
-        if model.mode == "fast":  # kept for quick retraining: zeros without a crop, NaN unasked
+        if model.mode == "fast":  # kept for quick retraining (zeros where there is no crop)
             embeddings = np.zeros((len(segments), EMBEDDING_DIM), np.float32)
-            embeddings[ok[decided[ok]]] = np.nan
-        if len(ask):
+        if len(ok):
             if embeddings is not None:
-                embeddings[ask] = model.embed(result.crops[ask], progress=progress)
-                crop_probability[ask] = model.predict_proba(embeddings=embeddings[ask])
+                embeddings[ok] = model.embed(result.crops[ok], progress=progress)
+                crop_probability[ok] = model.predict_proba(embeddings=embeddings[ok])
             else:
-                crop_probability[ask] = model.predict_proba(result.crops[ask], progress=progress)
-        head_input = crop_probability.copy()
-        head_input[ok[decided[ok]]] = 0.5  # any value in [0, 1] gives the same label
-        probability = model.segment_proba(result.features, head_input)
+                crop_probability[ok] = model.predict_proba(result.crops[ok], progress=progress)
+        probability = model.segment_proba(result.features, crop_probability)
         raw_label = np.nan_to_num(probability, nan=0.0) >= model.threshold
     with timer.stage("correction", points=len(segments)):
         label = correct_labels(raw_label, result.extents(), params.correction)

@@ -514,13 +514,9 @@ def _check_crop_size(run: Run, segment: int, input_size: int) -> None:
 
 
 def _run_embeddings(run: Run) -> np.ndarray | None:
-    """(S, 1280) stored embeddings, or None when the run has none, not one per segment, or not
-    one per crop: ``guardrail process`` leaves NaN rows for the crops whose segment's shape
-    decided alone (the CNN was not asked); their JPEGs are embedded instead."""
+    """(S, 1280) stored embeddings, or None when the run has none (or not one per segment)."""
     stored = run.embeddings()
     if stored is None or stored.shape != (len(run), EMBEDDING_DIM):
-        return None
-    if np.isnan(stored[run.segments["crop_status"] == CROP_OK]).any():
         return None
     return stored
 
