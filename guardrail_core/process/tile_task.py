@@ -43,7 +43,7 @@ from guardrail_core.formats.run_folder import (
 )
 from guardrail_core.formats.run_info import TileOutcome
 from guardrail_core.process.tile_plan import ProcessTile
-from guardrail_core.sensors.track import track_coordinates
+from guardrail_core.sensors.track import TrackCoordinates, track_coordinates
 from guardrail_core.timing import StageTimer
 
 PART_FILE = "part.json"
@@ -127,7 +127,9 @@ def _load_model(path: str) -> GuardrailClassifier:
     return load_model(Path(path))
 
 
-def read_window(source: DriveSource, tile: ProcessTile) -> tuple[Drive, object, np.ndarray]:
+def read_window(
+    source: DriveSource, tile: ProcessTile
+) -> tuple[Drive, TrackCoordinates, np.ndarray]:
     """The points a tile sees, read from the drive tiles its window touches.
 
     Returns the window as a :class:`Drive` (with the images its points may be cropped from),
@@ -144,7 +146,7 @@ def read_window(source: DriveSource, tile: ProcessTile) -> tuple[Drive, object, 
     inside = (track.station >= lo) & (track.station < hi)
     if not inside.all():
         points = PointCloud(*(getattr(points, f)[inside] for f in _CLOUD_FIELDS))
-        track = type(track)(track.station[inside], track.lateral[inside], track.height[inside])
+        track = TrackCoordinates(track.station[inside], track.lateral[inside], track.height[inside])
         index = index[inside]
     return source.drive(points), track, index
 
@@ -154,7 +156,7 @@ _CLOUD_FIELDS = ("xyz", "gps_time", "intensity", "rotation", "phase")
 
 def process_window(
     drive: Drive,
-    track: object,
+    track: TrackCoordinates,
     index: np.ndarray,
     drive_offsets: np.ndarray,
     model: GuardrailClassifier,
@@ -179,7 +181,7 @@ def process_window(
     start = time.perf_counter()
     part = Path(part)
     timer = timer or StageTimer(len(drive.points))
-    station = track.station  # type: ignore[attr-defined]
+    station = track.station
     window = drive
     if len(drive.points):
         # Only the images a segment of this window may be cropped from (by GPS time, §3.2).
@@ -196,7 +198,7 @@ def process_window(
         _write_empty_part(part, index, owned_points, drive_offsets)
         return _outcome(tile, int(owned_points.sum()), start, part, timer, {})
 
-    result = extract(window, model.input_size, params, timer=timer, progress=progress, track=track)  # type: ignore[arg-type]
+    result = extract(window, model.input_size, params, timer=timer, progress=progress, track=track)
     segments, choice = result.segments, result.choice
     ok = np.flatnonzero(choice.status == CROP_OK)
     with timer.stage("classify", points=len(segments)):
