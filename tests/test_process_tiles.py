@@ -185,13 +185,20 @@ def test_a_local_cluster_run_equals_the_in_process_run_and_survives_a_killed_wor
         killed: list[int] = []
 
         def kill_a_busy_worker() -> None:
-            # Wait for a worker to be busy with a tile, then kill its process.
+            # Wait for a tile's part to be half written (its folder there, its part.json not
+            # yet), then kill the busy workers: the retried tile finds the half-written part.
             while not killed:
+                half = [
+                    p
+                    for p in tmp_path.glob(".run.partial-*/.parts/*")
+                    if not (p / "part.json").exists()
+                ]
                 busy = [w for w, tasks in client.processing().items() if tasks]
-                if busy:
-                    pids = client.run(os.getpid, workers=busy[:1])
-                    os.kill(pids[busy[0]], signal.SIGKILL)
-                    killed.append(pids[busy[0]])
+                if half and busy:
+                    pids = client.run(os.getpid, workers=busy)
+                    for pid in pids.values():
+                        os.kill(pid, signal.SIGKILL)
+                    killed.extend(pids.values())
                 time.sleep(0.01)
 
         killer = threading.Thread(target=kill_a_busy_worker, daemon=True)

@@ -21,6 +21,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import json
+import shutil
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -192,6 +193,8 @@ def process_window(
         window = dataclasses.replace(drive, images=[drive.images[i] for i in keep])
     else:
         image_ids = np.zeros(0, np.int64)
+    if part.exists():  # left by an attempt whose worker died: Dask retries the tile
+        shutil.rmtree(part)
     part.mkdir(parents=True)
     owned_points = (station >= tile.station_m[0]) & (station < tile.station_m[1])
     if len(drive.points) == 0 or not owned_points.any():
