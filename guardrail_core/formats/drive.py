@@ -80,6 +80,10 @@ class PointCloud:
     def __len__(self) -> int:
         return int(self.xyz.shape[0])
 
+    def take(self, index: np.ndarray) -> PointCloud:
+        """The points at ``index`` ((M,) int or (N,) bool), in that order."""
+        return PointCloud(*(getattr(self, name)[index] for name in _CLOUD_FIELDS))
+
 
 @dataclass(frozen=True)
 class ImageRecord:

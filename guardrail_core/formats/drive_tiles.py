@@ -172,19 +172,23 @@ def read_tile_index(root: str | os.PathLike, name: str = INDEX_FILE) -> TileInde
     return TileIndex(tiles)
 
 
+def _travelled(trajectory: Trajectory) -> np.ndarray:
+    """(T,) float64 metres: horizontal distance driven at each trajectory sample."""
+    step = np.linalg.norm(np.diff(trajectory.position[:, :2], axis=0), axis=1)
+    return np.concatenate([[0.0], np.cumsum(step)])
+
+
 def vehicle_station(trajectory: Trajectory, gps_time: np.ndarray) -> np.ndarray:
     """(N,) float64 metres: the vehicle's distance driven (horizontal) at ``gps_time`` (N,) s,
     from the trajectory's first sample; constant beyond its ends."""
-    step = np.linalg.norm(np.diff(trajectory.position[:, :2], axis=0), axis=1)
-    travelled = np.concatenate([[0.0], np.cumsum(step)])
+    travelled = _travelled(trajectory)
     return np.interp(np.asarray(gps_time, np.float64), trajectory.time, travelled)
 
 
 def tile_boundaries(trajectory: Trajectory, tile_m: float | None) -> np.ndarray:
     """(K - 1,) float64 GPS seconds at which the vehicle passes 1, 2, ... times ``tile_m``
     metres (the starts of tiles 1..K-1); empty for ``tile_m`` None (one tile)."""
-    step = np.linalg.norm(np.diff(trajectory.position[:, :2], axis=0), axis=1)
-    travelled = np.concatenate([[0.0], np.cumsum(step)])
+    travelled = _travelled(trajectory)
     if tile_m is None or travelled[-1] <= tile_m:
         return np.zeros(0)
     marks = np.arange(tile_m, travelled[-1], tile_m)

@@ -230,22 +230,8 @@ def _window_in_memory(
     inside = (track.station >= lo) & (track.station < hi)
     if inside.all():
         return drive, track, np.arange(len(drive.points), dtype=np.int64)
-    points = drive.points
-    window = PointCloud(
-        points.xyz[inside],
-        points.gps_time[inside],
-        points.intensity[inside],
-        points.rotation[inside],
-        points.phase[inside],
-    )
-    window_track = TrackCoordinates(
-        track.station[inside], track.lateral[inside], track.height[inside]
-    )
-    return (
-        dataclasses.replace(drive, points=window, truth=None),
-        window_track,
-        np.flatnonzero(inside),
-    )
+    window = dataclasses.replace(drive, points=drive.points.take(inside), truth=None)
+    return window, track.take(inside), np.flatnonzero(inside)
 
 
 def _process(

@@ -35,7 +35,7 @@ from guardrail_core.errors import GuardrailError
 from guardrail_core.extract.classify import EMBEDDING_DIM, GuardrailClassifier
 from guardrail_core.extract.correct import correct_labels
 from guardrail_core.extract.pipeline import ExtractionParams, extract
-from guardrail_core.formats.drive import Drive, DriveSource, PointCloud, open_drive
+from guardrail_core.formats.drive import Drive, DriveSource, open_drive
 from guardrail_core.formats.run_folder import (
     CROP_OK,
     POINT_OFF_ROAD,
@@ -146,13 +146,9 @@ def read_window(
     track = track_coordinates(points.xyz, points.gps_time, source.trajectory)
     inside = (track.station >= lo) & (track.station < hi)
     if not inside.all():
-        points = PointCloud(*(getattr(points, f)[inside] for f in _CLOUD_FIELDS))
-        track = TrackCoordinates(track.station[inside], track.lateral[inside], track.height[inside])
+        points, track = points.take(inside), track.take(inside)
         index = index[inside]
     return source.drive(points), track, index
-
-
-_CLOUD_FIELDS = ("xyz", "gps_time", "intensity", "rotation", "phase")
 
 
 def process_window(

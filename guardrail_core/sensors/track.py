@@ -36,6 +36,10 @@ class TrackCoordinates:
     lateral: np.ndarray
     height: np.ndarray
 
+    def take(self, index: np.ndarray) -> TrackCoordinates:
+        """The coordinates of the points at ``index`` ((M,) int or (N,) bool)."""
+        return TrackCoordinates(self.station[index], self.lateral[index], self.height[index])
+
 
 def _path(
     trajectory: Trajectory,
