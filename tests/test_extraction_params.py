@@ -17,7 +17,7 @@ def test_every_stage_of_the_extraction_is_a_stage_params() -> None:
     stages = {
         f.name: getattr(ExtractionParams(), f.name) for f in dataclasses.fields(ExtractionParams)
     }
-    assert set(stages) == {"road", "segments", "crops", "correction"}
+    assert set(stages) == {"road", "segments", "crops", "classify", "correction"}
     assert all(isinstance(stage, StageParams) for stage in stages.values())
 
 

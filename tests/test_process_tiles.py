@@ -217,3 +217,22 @@ def test_a_local_cluster_run_equals_the_in_process_run_and_survives_a_killed_wor
     assert info.processing is not None and not info.processing.failed
     assert np.array_equal(final_labels(out), final_labels(whole_run))
     assert len(run_models(out)) == len(run_models(whole_run))
+
+
+def test_the_road_near_guardrails_is_what_a_full_distance_query_finds() -> None:
+    """The grid pre-filter of the road points a tile hands to the reconstruction drops none."""
+    from scipy.spatial import cKDTree
+
+    from guardrail_core.process.tile_task import _near
+
+    rng = np.random.default_rng(1)
+    for _ in range(20):
+        n = 50_000
+        xy = rng.uniform(-50, 50, (n, 2)) * rng.uniform(0.05, 3)
+        targets = rng.random(n) < rng.choice([0.0005, 0.01, 0.2])
+        candidates = ~targets & (rng.random(n) < 0.7)
+        reach = float(rng.choice([0.3, 1.0, 5.0]))
+        distance, _ = cKDTree(xy[targets]).query(xy[candidates], distance_upper_bound=reach)
+        expected = np.flatnonzero(candidates)[np.isfinite(distance)]
+        np.testing.assert_array_equal(_near(xy, targets, candidates, reach), expected)
+    assert len(_near(xy, np.zeros(n, bool), candidates, 1.0)) == 0

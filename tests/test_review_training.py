@@ -20,12 +20,12 @@ from guardrail_core.extract.training import HOLD_OUT_BLOCK_SLICES, TrainingSet, 
 from guardrail_core.formats.label_store import LABEL_GUARDRAIL, LABEL_OTHER, UNLABELLED
 from guardrail_core.formats.run_folder import SEGMENT_FIELDS, Run, load_run
 from guardrail_core.formats.run_info import ModelRef
+from guardrail_core.review.run_crops import read_crops
 from guardrail_core.review.training import (
     AGAINST_EFFECTIVE,
     AGAINST_OPERATOR,
     effective_labels,
     predict_run,
-    read_crops,
     segment_labels,
     train_from_run,
     training_set_from_run,

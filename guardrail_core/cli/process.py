@@ -97,7 +97,8 @@ def run(args: argparse.Namespace) -> int:
     )
     print(
         f"crops: {crops.ok} ok, {crops.no_image} with no image that holds all their points, "
-        f"{crops.too_small} too small to crop"
+        f"{crops.too_small} too small to crop; the CNN asked for {crops.asked} of the "
+        f"{crops.ok} (the shape decided the others)"
     )
     if crops.ok == 0 and counts.segments:
         if model.segment_head is not None:

@@ -20,6 +20,7 @@ from guardrail_core.extract.crops import (
 )
 from guardrail_core.extract.lattice import build_lattice
 from guardrail_core.extract.road import OFF_ROAD, ROAD, RoadParams, remove_road
+from guardrail_core.extract.segment_scores import ClassifyParams
 from guardrail_core.extract.segments import (
     SegmentParams,
     Segments,
@@ -44,6 +45,7 @@ class ExtractionParams(StageParams):
     road: RoadParams = field(default_factory=RoadParams)
     segments: SegmentParams = field(default_factory=SegmentParams)
     crops: CropParams = field(default_factory=CropParams)
+    classify: ClassifyParams = field(default_factory=ClassifyParams)
     correction: CorrectionParams = field(default_factory=CorrectionParams)
 
     @classmethod
@@ -74,6 +76,7 @@ _STAGES: dict[str, type[StageParams]] = {
     "road": RoadParams,
     "segments": SegmentParams,
     "crops": CropParams,
+    "classify": ClassifyParams,
     "correction": CorrectionParams,
 }
 

@@ -156,19 +156,30 @@ class ModelRef:
 
 @dataclass(frozen=True)
 class CropCounts:
-    """Segments by crop status (``segments.npz`` ``crop_status``: 0 ok, 1 no_image, 2 too_small)."""
+    """Segments by crop status (``segments.npz`` ``crop_status``: 0 ok, 1 no_image, 2 too_small),
+    and ``asked``: the ok crops the CNN looked at (the others' label the shape decided;
+    :mod:`guardrail_core.extract.segment_scores`)."""
 
     ok: int
     no_image: int
     too_small: int
+    asked: int
 
     def to_json(self) -> dict[str, int]:
-        return {"ok": self.ok, "no_image": self.no_image, "too_small": self.too_small}
+        return {
+            "ok": self.ok,
+            "no_image": self.no_image,
+            "too_small": self.too_small,
+            "asked": self.asked,
+        }
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> CropCounts:
         return cls(
-            ok=int(data["ok"]), no_image=int(data["no_image"]), too_small=int(data["too_small"])
+            ok=int(data["ok"]),
+            no_image=int(data["no_image"]),
+            too_small=int(data["too_small"]),
+            asked=int(data.get("asked", data["ok"])),  # runs before shape-first asked every crop
         )
 
 

@@ -77,7 +77,7 @@ def stitch_parts(staging: Path, parts: list[Path | None], tile_points: list[int]
     has_embeddings = True
     pieces: dict[int, list[tuple[Path, int]]] = defaultdict(list)
     totals: dict[str, int] = dict.fromkeys(_COUNT_KEYS, 0)
-    crops = {"ok": 0, "no_image": 0, "too_small": 0}
+    crops = {"ok": 0, "no_image": 0, "too_small": 0, "asked": 0}
     stages: dict[str, dict[str, float]] = {}
     guardrail: list[tuple[np.ndarray, np.ndarray]] = []
     ground: list[tuple[np.ndarray, np.ndarray]] = []

@@ -39,7 +39,8 @@ def plan_tiles(
     length_m: float, tile_m: float | None, margin_m: float, slice_length_m: float
 ) -> list[ProcessTile]:
     """Cut a drive of ``length_m`` metres of trajectory into tiles of ``tile_m`` metres
-    (None: one tile owning everything), each seeing ``margin_m`` metres beyond both ends.
+    (None: one tile owning everything), each seeing ``margin_m`` metres beyond both ends. The
+    last tile owns the rest of the drive: from half a tile to one and a half.
 
     Raises
     ------
@@ -56,7 +57,9 @@ def plan_tiles(
         raise InvalidOptionError(
             f"tiles must be a positive multiple of the {slice_length_m} m slice, got {tile_m} m"
         )
-    count = max(1, math.ceil(length_m / tile_m - 1e-9))
+    # A remainder shorter than half a tile joins the last tile: a task of a few metres would
+    # cost a worker's round (and its margins) for almost nothing.
+    count = max(1, math.floor(length_m / tile_m + 0.5))
     tiles = []
     for k in range(count):
         lo = -math.inf if k == 0 else k * tile_m

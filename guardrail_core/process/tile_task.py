@@ -32,9 +32,10 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from guardrail_core.errors import GuardrailError
-from guardrail_core.extract.classify import EMBEDDING_DIM, GuardrailClassifier
+from guardrail_core.extract.classify import GuardrailClassifier
 from guardrail_core.extract.correct import correct_labels
 from guardrail_core.extract.pipeline import ExtractionParams, extract
+from guardrail_core.extract.segment_scores import score_segments
 from guardrail_core.formats.drive import Drive, DriveSource, open_drive
 from guardrail_core.formats.run_folder import (
     CROP_OK,
@@ -199,20 +200,21 @@ def process_window(
 
     result = extract(window, model.input_size, params, timer=timer, progress=progress, track=track)
     segments, choice = result.segments, result.choice
-    ok = np.flatnonzero(choice.status == CROP_OK)
     with timer.stage("classify", points=len(segments)):
-        crop_probability = np.full(len(segments), np.nan, np.float64)
-        embeddings = None
-        if model.mode == "fast":  # kept for quick retraining (zeros where there is no crop)
-            embeddings = np.zeros((len(segments), EMBEDDING_DIM), np.float32)
-        if len(ok):
-            if embeddings is not None:
-                embeddings[ok] = model.embed(result.crops[ok], progress=progress)
-                crop_probability[ok] = model.predict_proba(embeddings=embeddings[ok])
-            else:
-                crop_probability[ok] = model.predict_proba(result.crops[ok], progress=progress)
-        probability = model.segment_proba(result.features, crop_probability)
-        raw_label = np.nan_to_num(probability, nan=0.0) >= model.threshold
+        scores = score_segments(
+            model,
+            result.features,
+            result.crops,
+            choice.status == CROP_OK,
+            params.classify,
+            progress=progress,
+        )
+        crop_probability, probability, raw_label = (
+            scores.crop_probability,
+            scores.probability,
+            scores.raw_label,
+        )
+        embeddings = scores.embeddings
     with timer.stage("correction", points=len(segments)):
         label = correct_labels(raw_label, result.extents(), params.correction)
 
@@ -275,14 +277,7 @@ def process_window(
         # any guardrail point this window sees (a run across the tile edge included).
         guardrail = in_segment & label[np.maximum(point_segment, 0)]
         road = (point_segment == POINT_ROAD) & owned_points
-        ground_keep = np.zeros(0, np.int64)
-        if guardrail.any() and road.any():
-            tree = cKDTree(drive.points.xyz[guardrail, :2])
-            road_ids = np.flatnonzero(road)
-            distance, _ = tree.query(
-                drive.points.xyz[road_ids, :2], distance_upper_bound=ground_reach_m
-            )
-            ground_keep = road_ids[np.isfinite(distance)]
+        ground_keep = _near(drive.points.xyz[:, :2], guardrail, road, ground_reach_m)
         own_guardrail = np.flatnonzero(guardrail & owned_points)
         np.savez(
             part / "guardrail.npz",
@@ -302,6 +297,7 @@ def process_window(
                 "ok": int((status == CROP_OK).sum()),
                 "no_image": int((status == 1).sum()),
                 "too_small": int((status == 2).sum()),
+                "asked": int(scores.asked[own_ids].sum()),
             },
             "guardrail_segments_raw": int(raw_label[own_ids].sum()),
             "guardrail_segments": int(label[own_ids].sum()),
@@ -309,6 +305,33 @@ def process_window(
             "window_points": len(drive.points),
         }
     return _outcome(tile, counts["points"], start, part, timer, counts)
+
+
+def _near(xy: np.ndarray, targets: np.ndarray, candidates: np.ndarray, reach: float) -> np.ndarray:
+    """(K,) int64, ascending: the ``candidates`` (N,) bool among the points ``xy`` (N, 2) that lie
+    closer than ``reach`` to one of the ``targets`` (N,) bool.
+
+    Only candidates in or beside a ``reach``-sized grid cell holding a target are measured (the
+    road of a tile is mostly far from any guardrail)."""
+    if not targets.any() or not candidates.any() or not reach > 0:
+        return np.zeros(0, np.int64)
+    target_xy = xy[targets]
+    ids = np.flatnonzero(candidates)
+    corner = target_xy.min(axis=0) - 2 * reach
+    target_cell = np.floor((target_xy - corner) / reach).astype(np.int64)
+    width = int(target_cell[:, 1].max()) + 3
+    occupied = np.unique(target_cell[:, 0] * width + target_cell[:, 1])
+    around = np.unique(
+        (occupied[:, None] + (np.arange(-1, 2)[:, None] * width + np.arange(-1, 2)).ravel()).ravel()
+    )
+    cell = np.floor((xy[ids] - corner) / reach).astype(np.int64)
+    inside = (cell >= 0).all(axis=1) & (cell[:, 1] < width)
+    ids = ids[inside]
+    ids = ids[np.isin(cell[inside, 0] * width + cell[inside, 1], around)]
+    if len(ids) == 0:
+        return ids
+    distance, _ = cKDTree(target_xy).query(xy[ids], distance_upper_bound=reach)
+    return ids[np.isfinite(distance)]
 
 
 def _outcome(

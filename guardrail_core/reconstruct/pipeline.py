@@ -407,15 +407,35 @@ def split_runs(
         run_xyz = points[order[starts[r] : starts[r + 1]]]
         near_ground = np.zeros((0, 3))
         if ground_tree is not None:
-            step, reach = params.runs.ground_query_step, params.runs.ground_reach_m
-            lists = ground_tree.query_ball_point(run_xyz[::step, :2], reach)
-            index = np.unique(np.concatenate([np.asarray(i, np.int64) for i in lists]))
+            index = _ground_near(ground_tree, run_xyz[:: params.runs.ground_query_step, :2], params)
             near_ground = ground_xyz[index]
         centre = run_xyz.mean(axis=0)
         toward = np.zeros(3)
         toward[:2] = track[track_tree.query(centre[:2])[1]] - centre[:2]
         runs.append(RunInput(r, run_xyz, near_ground, toward))
     return runs
+
+
+def _ground_near(
+    ground_tree: cKDTree, sample_xy: np.ndarray, params: ReconstructionParams
+) -> np.ndarray:
+    """(G,) int64, ascending: the ground points within ``runs.ground_reach_m`` (horizontally) of
+    any of a run's sampled points (K, 2): those whose nearest sampled point is that close, among
+    the ground points of a disc around the run (one ball query, not one per sampled point)."""
+    reach = params.runs.ground_reach_m
+    lo, hi = sample_xy.min(axis=0), sample_xy.max(axis=0)
+    candidates = np.asarray(
+        ground_tree.query_ball_point((lo + hi) / 2, float(np.hypot(*(hi - lo))) / 2 + reach),
+        np.int64,
+    )
+    if len(candidates) == 0:
+        return candidates
+    candidates.sort()
+    # distance_upper_bound excludes its own value; query_ball_point includes its radius.
+    distance, _ = cKDTree(sample_xy).query(
+        ground_tree.data[candidates], distance_upper_bound=np.nextafter(reach, np.inf)
+    )
+    return candidates[distance <= reach]
 
 
 def reconstruct_run_input(

@@ -9,7 +9,9 @@ them), and can then re-predict the run (:func:`predict_run`) and replace its pre
 (:func:`write_predictions`).
 
 In fast mode the run's ``embeddings.npy`` stands in for the crops, so no image is decoded and the
-backbone never runs. Measured on the development machine (2 shared CPU cores), fast mode:
+backbone never runs, but once per run for the crops ``guardrail process`` did not ask the CNN
+about (:func:`~guardrail_core.review.run_crops.complete_embeddings`). Measured on the
+development machine (2 shared CPU cores), fast mode, embeddings complete:
 :func:`train_from_run` on the test run (267 segments, 231 crops) 1.0-1.6 s, on the demo run
 (1,168 segments, 1,018 crops) 2-3 s, and :func:`train_on_set` on the demo set doubled (2,336
 segments, 2,036 crops) 3.2-3.6 s; :func:`predict_run` plus :func:`write_predictions` of the demo
@@ -26,12 +28,10 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 
-from guardrail_core.errors import InvalidOptionError, RunFolderError, TrainingDataError
+from guardrail_core.errors import InvalidOptionError, TrainingDataError
 from guardrail_core.extract.classify import (
-    EMBEDDING_DIM,
     ClassifierParams,
     GuardrailClassifier,
     classification_metrics,
@@ -39,9 +39,11 @@ from guardrail_core.extract.classify import (
 from guardrail_core.extract.correct import CorrectionParams, SegmentExtents, correct_labels
 from guardrail_core.extract.crops import CROP_OK
 from guardrail_core.extract.segment_head import SegmentHeadParams
+from guardrail_core.extract.segment_scores import ClassifyParams, crops_to_ask, fuse_scores
 from guardrail_core.extract.training import HOLD_OUT_BLOCK_SLICES, TrainingSet, train_on_set
 from guardrail_core.formats.run_folder import SEGMENT_FIELDS, Run, load_run, replace_run_tables
 from guardrail_core.formats.run_info import ModelRef, Predicted
+from guardrail_core.review.run_crops import complete_embeddings, read_crops
 
 __all__ = [
     "ReviewTraining",
@@ -173,7 +175,7 @@ def training_set_from_run(
     segments = run.segments
     has_crop = segments["crop_status"][rows] == CROP_OK
     crop_segments = rows[has_crop]
-    stored = _run_embeddings(run) if mode == "fast" else None
+    stored = complete_embeddings(run, input_size) if mode == "fast" else None
     crops = embeddings = None
     if stored is not None:
         embeddings = stored[crop_segments].astype(np.float32)
@@ -382,7 +384,7 @@ def predict_run(
     Returns
     -------
     dict
-        ``crop_probability`` (S,) float32 (NaN without a crop), ``probability`` (S,) float32,
+        ``crop_probability`` (S,) float32 (NaN without a crop or not asked), ``probability`` (S,) float32,
         ``raw_label`` (S,) bool (``probability >= threshold``, NaN counting as other),
         ``label`` (S,) bool (corrected).
 
@@ -392,17 +394,19 @@ def predict_run(
         A crop JPEG is missing, unreadable or not of the model's input size.
     """
     segments = run.segments
-    ok = np.flatnonzero(segments["crop_status"] == CROP_OK)
+    has_crop = segments["crop_status"] == CROP_OK
+    asked = crops_to_ask(model, segments["features"], has_crop, _run_classify(run))
+    rows = np.flatnonzero(asked)
     crop_probability = np.full(len(run), np.nan, np.float64)
-    if len(ok):
-        stored = _run_embeddings(run) if model.mode == "fast" else None
+    if len(rows):
+        stored = None
+        if model.mode == "fast":
+            stored = complete_embeddings(run, model.input_size, rows=rows)
         if stored is not None:
-            _check_crop_size(run, int(ok[0]), model.input_size)
-            crop_probability[ok] = model.predict_proba(embeddings=stored[ok].astype(np.float32))
+            crop_probability[rows] = model.predict_proba(embeddings=stored[rows].astype(np.float32))
         else:
-            crop_probability[ok] = model.predict_proba(read_crops(run, ok, model.input_size))
-    probability = model.segment_proba(segments["features"], crop_probability)
-    raw_label = np.nan_to_num(probability, nan=0.0) >= model.threshold
+            crop_probability[rows] = model.predict_proba(read_crops(run, rows, model.input_size))
+    probability, raw_label = fuse_scores(model, segments["features"], has_crop, crop_probability)
     if correction is None:
         correction = _run_correction(run)
     extents = SegmentExtents(segments["slice_index"], segments["lateral"], segments["height"])
@@ -484,43 +488,6 @@ def write_predictions(
 # ---------------------------------------------------------------------------------------------
 
 
-def read_crops(run: Run, segments: np.ndarray, input_size: int) -> np.ndarray:
-    """(K, input_size, input_size, 3) uint8 RGB crops of the given segments, from their JPEGs.
-
-    Raises :class:`RunFolderError` for a missing or unreadable JPEG or one of another size.
-    """
-    out = np.empty((len(segments), input_size, input_size, 3), np.uint8)
-    for i, s in enumerate(np.asarray(segments, np.int64).tolist()):
-        out[i] = _read_crop(run, s, input_size)
-    return out
-
-
-def _read_crop(run: Run, segment: int, input_size: int) -> np.ndarray:
-    path = run.crop_path(segment)
-    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
-    if image is None:
-        raise RunFolderError(f"{path}: the crop of segment {segment} is missing or unreadable")
-    if image.shape != (input_size, input_size, 3):
-        raise RunFolderError(
-            f"{path}: expected a {input_size} x {input_size} px crop (the model's input size), "
-            f"got {image.shape[1]} x {image.shape[0]} px"
-        )
-    return image[:, :, ::-1]  # BGR -> RGB
-
-
-def _check_crop_size(run: Run, segment: int, input_size: int) -> None:
-    """The run's crops (and so its embeddings) are of the model's input size."""
-    _read_crop(run, segment, input_size)
-
-
-def _run_embeddings(run: Run) -> np.ndarray | None:
-    """(S, 1280) stored embeddings, or None when the run has none (or not one per segment)."""
-    stored = run.embeddings()
-    if stored is None or stored.shape != (len(run), EMBEDDING_DIM):
-        return None
-    return stored
-
-
 def _check_point_labels(run: Run, point_labels: np.ndarray) -> None:
     shape = np.shape(point_labels)
     if shape != (len(run.point_segment),):
@@ -560,6 +527,14 @@ def _current_raw_labels(run: Run) -> np.ndarray:
     """(S,) bool, the run's model's raw labels: ``probability >= threshold`` (NaN: other)."""
     probability = np.asarray(run.segments["probability"], np.float64)
     return np.nan_to_num(probability, nan=0.0) >= _run_threshold(run)
+
+
+def _run_classify(run: Run) -> ClassifyParams:
+    """The run's own classify parameters; a run from before shape-first asked every crop."""
+    stored = run.info.params.get("classify")
+    if stored is None:
+        return ClassifyParams(shape_first=False)
+    return ClassifyParams.from_json(stored)
 
 
 def _run_correction(run: Run) -> CorrectionParams:

@@ -105,35 +105,48 @@ def track_coordinates(
     station = np.interp(gps_time, trajectory.time, sample_arc)
     x, y = xyz[:, 0], xyz[:, 1]
     for _ in range(iterations):
-        foot_x, foot_y, tx, ty = _at(station, arc, path_xy, tangent)
+        at = _PathPoint(station, arc)
+        foot_x, foot_y, tx, ty = at.foot(path_xy, tangent)
         # Newton step: on a curve the foot point moves 1 / (1 - curvature * lateral) times as
         # fast as the point's tangential offset.
-        lateral = tx * (y - foot_y) - ty * (x - foot_x)
-        bend = 1.0 - np.interp(np.clip(station, arc[0], arc[-1]), arc, curvature) * lateral
-        station = station + ((x - foot_x) * tx + (y - foot_y) * ty) / np.maximum(bend, _MIN_BEND)
-    foot_x, foot_y, tx, ty = _at(station, arc, path_xy, tangent)
+        dx, dy = x - foot_x, y - foot_y
+        bend = 1.0 - at.value(curvature) * (tx * dy - ty * dx)
+        station = station + (dx * tx + dy * ty) / np.maximum(bend, _MIN_BEND)
+    at = _PathPoint(station, arc)
+    foot_x, foot_y, tx, ty = at.foot(path_xy, tangent)
     lateral = tx * (y - foot_y) - ty * (x - foot_x)
-    height = xyz[:, 2] - np.interp(station, arc, road)
+    height = xyz[:, 2] - at.value(road)
     return TrackCoordinates(station=station, lateral=lateral, height=height)
 
 
-def _at(
-    station: np.ndarray, arc: np.ndarray, path_xy: np.ndarray, tangent: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Foot point (x, y) and unit tangent (tx, ty) at ``station``; straight beyond the ends.
+class _PathPoint:
+    """Where stations (N,) fall on the path sampled at ``arc`` (K,): one binary search serves
+    every quantity interpolated there; straight beyond the ends."""
 
-    One binary search serves all four interpolations.
-    """
-    inside = np.clip(station, arc[0], arc[-1])
-    upper = np.clip(np.searchsorted(arc, inside, side="right"), 1, len(arc) - 1)
-    lower = upper - 1
-    weight = (inside - arc[lower]) / (arc[upper] - arc[lower])
-    tx = tangent[lower, 0] + weight * (tangent[upper, 0] - tangent[lower, 0])
-    ty = tangent[lower, 1] + weight * (tangent[upper, 1] - tangent[lower, 1])
-    norm = np.hypot(tx, ty)
-    tx /= norm
-    ty /= norm
-    beyond = station - inside
-    foot_x = path_xy[lower, 0] + weight * (path_xy[upper, 0] - path_xy[lower, 0]) + beyond * tx
-    foot_y = path_xy[lower, 1] + weight * (path_xy[upper, 1] - path_xy[lower, 1]) + beyond * ty
-    return foot_x, foot_y, tx, ty
+    def __init__(self, station: np.ndarray, arc: np.ndarray) -> None:
+        self.station = station
+        self.inside = np.clip(station, arc[0], arc[-1])
+        upper = np.searchsorted(arc, self.inside, side="right")
+        np.clip(upper, 1, len(arc) - 1, out=upper)
+        self.lower = upper - 1
+        self.upper = upper
+        self.weight = (self.inside - arc[self.lower]) / (arc[upper] - arc[self.lower])
+
+    def value(self, samples: np.ndarray) -> np.ndarray:
+        """(N,) ``samples`` (K,) interpolated linearly (held beyond the ends)."""
+        low = samples[self.lower]
+        return low + self.weight * (samples[self.upper] - low)
+
+    def foot(
+        self, path_xy: np.ndarray, tangent: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Foot point (x, y) and unit tangent (tx, ty), continued along the end tangents."""
+        tx = self.value(tangent[:, 0])
+        ty = self.value(tangent[:, 1])
+        norm = np.hypot(tx, ty)
+        tx /= norm
+        ty /= norm
+        beyond = self.station - self.inside
+        foot_x = self.value(path_xy[:, 0]) + beyond * tx
+        foot_y = self.value(path_xy[:, 1]) + beyond * ty
+        return foot_x, foot_y, tx, ty

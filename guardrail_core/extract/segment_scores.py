@@ -1,0 +1,125 @@
+"""Classifying a window's segments (§3.3), asking the CNN only where the shape leaves it open.
+
+With a segment head, a segment's label fuses its shape and neighbour features with its crop's
+probability, and for most segments the shape alone already puts the label on one side of the
+threshold whatever the crop says (:meth:`GuardrailClassifier.shape_decides`, exact). Those crops
+are not run through the CNN: their ``crop_probability`` is NaN, their embedding row NaN ("not
+asked"), their ``probability`` the head's answer for a crop probability of 0.5, and their label
+the one any crop would give. On the simulated streets that is about 60 % of the crops, and the
+CNN was about half of processing. The review loop embeds the crops not asked from their JPEGs the
+first time it needs them (:mod:`guardrail_core.review.embeddings`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from guardrail_core.params import StageParams, param
+
+if TYPE_CHECKING:  # the classifier brings torch; the parameters must not
+    from guardrail_core.extract.classify import GuardrailClassifier
+
+
+@dataclass(frozen=True)
+class ClassifyParams(StageParams):
+    """How the crops are put to the classifier."""
+
+    shape_first: bool = param(
+        True,
+        doc="ask the CNN only for crops whose segment's shape leaves the label open (the labels "
+        "are the same; about twice as fast); false asks it for every crop, so every crop has a "
+        "probability and an embedding in the run",
+    )
+
+
+@dataclass(frozen=True)
+class SegmentScores:
+    """What the classifier says of S segments.
+
+    Attributes
+    ----------
+    crop_probability : (S,) float64, the CNN's P(guardrail) of the crop; NaN without a crop or
+        where the CNN was not asked
+    probability : (S,) float64, the segment head's P(guardrail) (crops not asked count as 0.5)
+    raw_label : (S,) bool, ``probability >= threshold`` (NaN counting as other)
+    asked : (S,) bool, the crops the CNN looked at
+    embeddings : (S, 1280) float32 backbone embeddings for a fast model (zeros without a crop,
+        NaN where the CNN was not asked), else None
+    """
+
+    crop_probability: np.ndarray
+    probability: np.ndarray
+    raw_label: np.ndarray
+    asked: np.ndarray
+    embeddings: np.ndarray | None
+
+
+def score_segments(
+    model: GuardrailClassifier,
+    features: np.ndarray,
+    crops: np.ndarray,
+    has_crop: np.ndarray,
+    params: ClassifyParams = ClassifyParams(),
+    *,
+    progress: bool = False,
+) -> SegmentScores:
+    """Classify segments from their features and crops.
+
+    Parameters
+    ----------
+    model : the classifier
+    features : (S, F) float32 shape and neighbour features
+    crops : (S, C, C, 3) uint8 RGB crops (only rows with ``has_crop`` are read)
+    has_crop : (S,) bool, segments with a crop
+    params : whether the shape is asked first
+    """
+    from guardrail_core.extract.backbone import EMBEDDING_DIM
+
+    has_crop = np.asarray(has_crop, bool)
+    asked = crops_to_ask(model, features, has_crop, params)
+    rows = np.flatnonzero(asked)
+    crop_probability = np.full(len(features), np.nan, np.float64)
+    embeddings = None
+    if model.mode == "fast":  # kept for quick retraining
+        embeddings = np.zeros((len(features), EMBEDDING_DIM), np.float32)
+        embeddings[has_crop & ~asked] = np.nan
+    if len(rows):
+        if embeddings is not None:
+            embeddings[rows] = model.embed(crops[rows], progress=progress)
+            crop_probability[rows] = model.predict_proba(embeddings=embeddings[rows])
+        else:
+            crop_probability[rows] = model.predict_proba(crops[rows], progress=progress)
+    probability, raw_label = fuse_scores(model, features, has_crop, crop_probability)
+    return SegmentScores(crop_probability, probability, raw_label, asked, embeddings)
+
+
+def crops_to_ask(
+    model: GuardrailClassifier,
+    features: np.ndarray,
+    has_crop: np.ndarray,
+    params: ClassifyParams = ClassifyParams(),
+) -> np.ndarray:
+    """(S,) bool: the crops the CNN must look at (all crops without ``shape_first``)."""
+    asked = np.asarray(has_crop, bool).copy()
+    if params.shape_first:
+        asked &= ~model.shape_decides(features)
+    return asked
+
+
+def fuse_scores(
+    model: GuardrailClassifier,
+    features: np.ndarray,
+    has_crop: np.ndarray,
+    crop_probability: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The segment head's (S,) probability and raw label from the features and the crops'
+    probabilities (NaN where a crop was not asked, or there is none)."""
+    # A crop not asked is one whose probability does not matter: any value in [0, 1] puts the
+    # segment on the same side of the threshold, so the head gets 0.5 (with has-crop set).
+    not_asked = np.asarray(has_crop, bool) & ~np.isfinite(crop_probability)
+    probability = model.segment_proba(features, np.where(not_asked, 0.5, crop_probability))
+    raw_label = np.nan_to_num(probability, nan=0.0) >= model.threshold
+    return probability, raw_label
