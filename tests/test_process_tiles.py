@@ -110,6 +110,11 @@ def test_folder_processing_in_process_equals_the_in_memory_run(
     assert len(list((out / "points").glob("*.npz"))) == info.drive.tiles
     assert np.array_equal(final_labels(out), final_labels(whole_run))
     assert len(run_models(out)) == len(run_models(whole_run))
+    timings = json.loads((out / "timings.json").read_text())
+    phases = timings["phases"]
+    assert list(phases) == ["start", "tiles", "stitch", "reconstruct", "finish"]
+    assert all(v >= 0 for v in phases.values())
+    assert phases["tiles"] > 0 and sum(phases.values()) <= timings["total_seconds"]
 
 
 def test_a_window_reads_only_the_drive_tiles_it_touches(tiled_drive: Path, tmp_path: Path):

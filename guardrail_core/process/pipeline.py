@@ -263,11 +263,21 @@ def _process(
     n_points = len(drive.points) if n_points is None else n_points
     tile_m, margin_m, cluster = processing
     sources = [*drive_parts(drive.root), *inputs]
+    phases: dict[str, float] = {}  # wall seconds of each phase, in order
+    lap = time.perf_counter()
+
+    def phase(name: str) -> None:
+        nonlocal lap
+        now = time.perf_counter()
+        phases[name] = round(phases.get(name, 0.0) + now - lap, 4)
+        lap = now
+
     with staged_folder(out, overwrite=overwrite, inputs=sources) as staging:
         parts_dir = staging / _PARTS_DIR
         parts_dir.mkdir()
         part_of = {t.number: parts_dir / f"{t.number:06d}" for t in tiles}
         with _client(client, cluster) as dask:
+            phase("start")
             results: list[Any]
             if run_here is not None:
                 results = map_tasks(
@@ -291,6 +301,7 @@ def _process(
                     progress=progress,
                     points=lambda o: o.points,
                 )
+            phase("tiles")
             outcomes = [_outcome_of(tile, r) for tile, r in zip(tiles, results, strict=True)]
             ok = [o.error is None for o in outcomes]
             if not any(ok):
@@ -325,6 +336,7 @@ def _process(
                 image_files=image_files,
                 embeddings=stitched.embeddings,
             )
+            phase("stitch")
             if reconstruction is not None:
                 start = time.perf_counter()
                 runs = split_runs(
@@ -363,6 +375,8 @@ def _process(
                     "points": len(stitched.guardrail_xyz),
                 }
                 info = dataclasses.replace(info, reconstruction=summary)
+                phase("reconstruct")
+        phase("finish")  # the cluster closed
         wall = round(time.perf_counter() - clock, 4)
         info = dataclasses.replace(
             info,
@@ -380,6 +394,7 @@ def _process(
         folder = RunFolder(staging)
         folder.run_file.write_text(json.dumps(run_json, indent=2) + "\n")
         timings["total_seconds"] = wall
+        timings["phases"] = phases
         folder.timings_file.write_text(json.dumps(timings, indent=2) + "\n")
         _remove_tree(parts_dir)
     return info
