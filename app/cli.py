@@ -30,6 +30,15 @@ def add_serve_command(sub: argparse._SubParsersAction) -> None:
         "--token", help="secret every API call must carry; required beyond 127.0.0.1"
     )
     serve.add_argument(
+        "--allowed-host",
+        action="append",
+        default=[],
+        metavar="NAME",
+        help="a further host name browsers reach the app by (a proxy's, a DNS name); the "
+        "loopback, the --host address and, for 0.0.0.0, this machine's names are answered "
+        "already (repeatable)",
+    )
+    serve.add_argument(
         "--operator", default=None, help="name recorded with labels (default: your user name)"
     )
     serve.add_argument(
@@ -56,6 +65,7 @@ def _serve(args: argparse.Namespace) -> int:
         args.drive,
         args.run,
         host=args.host,
+        allowed_hosts=args.allowed_host,
         port=args.port,
         scene_port=args.scene_port,
         token=args.token,

@@ -14,7 +14,7 @@ models (compared route by route, with a drive, a run, labels, a training and a r
 from __future__ import annotations
 
 from collections.abc import Iterable
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -47,10 +47,21 @@ def error_response(status: int, description: str) -> dict[int | str, Any]:
     return {status: {"model": ErrorDetail, "description": description}}
 
 
+#: A segment id in a request: any number the run's int64 tables can hold (a larger one is a 422,
+#: not an overflow; one the run does not have is a 404).
+SegmentId = Annotated[int, Field(ge=-(2**63), le=2**63 - 1)]
+
 JPEG = file_response(["image/jpeg"], "The image (JPEG)")
 NOT_FOUND = error_response(404, "No such object (the detail names it)")
 CONFLICT = error_response(409, "The state does not allow it now (the detail says why)")
 UNAUTHORIZED = error_response(401, "The server needs its token (Authorization: Bearer or ?token=)")
+#: What app.request_guard answers before a route runs (state changes: 403, 413, 415).
+GUARDED = {
+    **error_response(400, "The request addressed a host name this server does not answer"),
+    **error_response(403, "A state change from a page of another origin"),
+    **error_response(413, "The body is over the size limit"),
+    **error_response(415, "A state change without Content-Type: application/json"),
+}
 
 
 # -- info ---------------------------------------------------------------------------------------

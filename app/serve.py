@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import secrets
+from collections.abc import Sequence
 from pathlib import Path
 
 import uvicorn
@@ -11,6 +12,7 @@ import viser
 from app.auth import is_loopback
 from app.jobs import JobRunner
 from app.main import create_app
+from app.request_guard import allowed_hosts_for
 from app.scene.viewer import ReviewScene
 from app.session import ReviewSession
 from guardrail_core.errors import InvalidOptionError, RunFolderError
@@ -43,6 +45,7 @@ def serve(
     run: Path | None = None,
     *,
     host: str = "127.0.0.1",
+    allowed_hosts: Sequence[str] = (),
     port: int = 8000,
     scene_port: int | None = None,
     token: str | None = None,
@@ -58,6 +61,7 @@ def serve(
     ----------
     drive, run : the drive folder and its run folder (default: ``DRIVE/../run``)
     host : the address both servers bind to; beyond the loopback a token is required
+    allowed_hosts : further host names the app answers (:func:`app.request_guard.allowed_hosts_for`)
     port : the app's port; the 3D scene takes ``scene_port`` (default ``port + 1``)
     token : every API call must carry it (``Authorization: Bearer`` or ``?token=``)
     operator : the name recorded with labels made in the 3D scene
@@ -98,6 +102,7 @@ def serve(
         jobs=jobs,
         scene_port=scene_port,
         scene_clients=lambda: len(server.get_clients()),
+        allowed_hosts=allowed_hosts_for(host, allowed_hosts),
     )
     shown = "127.0.0.1" if host in ("0.0.0.0", "::") else host
     query = f"?token={token}" if token else ""

@@ -101,11 +101,11 @@ def test_relabel_a_segment_then_undo(client: TestClient, session: ReviewSession)
     assert after["model_label"] == before["model_label"]  # the model's label is kept apart
     assert after["history"][0]["new"] == flipped and after["history"][0]["who"] == "tester"
 
-    undone = client.post("/api/labels/undo").json()
+    undone = client.post("/api/labels/undo", json={}).json()
     assert undone["undone_batch"] == answer["batch"]
     again = client.get(f"/api/segments/{s}").json()
     assert again["label"] == before["label"] and again["reviewed"] is False
-    assert client.post("/api/labels/undo").json()["batch"] is None  # nothing left to undo
+    assert client.post("/api/labels/undo", json={}).json()["batch"] is None  # nothing left to undo
 
 
 def test_a_whole_connected_run_is_relabelled_at_once(client: TestClient, session: ReviewSession):
@@ -177,7 +177,7 @@ def test_token_is_checked_on_every_api_call(session: ReviewSession) -> None:
         for url in ("/api/info", "/api/segments", "/api/queue", "/api/models", "/api/downloads"):
             assert client.get(url).status_code == 401, url
         assert client.put("/api/segments/0/label", json={"label": "other"}).status_code == 401
-        assert client.post("/api/train").status_code == 401
+        assert client.post("/api/train", json={}).status_code == 401
         wrong = {"Authorization": "Bearer nope"}
         assert client.get("/api/info", headers=wrong).status_code == 401
         good = {"Authorization": "Bearer s3cret"}
@@ -225,8 +225,8 @@ def test_fine_tune_then_activate(client: TestClient, session: ReviewSession) -> 
     versions = {m["version"]: m for m in models["models"]}
     assert models["active"] == current and versions[result["version"]]["active"] is False
 
-    assert client.post("/api/models/nonexistent/activate").status_code == 404
-    answer = client.post(f"/api/models/{result['version']}/activate").json()
+    assert client.post("/api/models/nonexistent/activate", json={}).status_code == 404
+    answer = client.post(f"/api/models/{result['version']}/activate", json={}).json()
     assert answer["active"] == result["version"]
     run = load_run(session.run.root)
     assert run.info.model.version == result["version"]
@@ -236,12 +236,12 @@ def test_fine_tune_then_activate(client: TestClient, session: ReviewSession) -> 
     assert sorted(row["id"] for row in rows) == guardrail
     assert all(row["label"] == "guardrail" for row in rows)
     # And the model that made the run can be activated again (its folder was given).
-    assert client.post(f"/api/models/{current}/activate").json()["active"] == current
+    assert client.post(f"/api/models/{current}/activate", json={}).json()["active"] == current
 
 
 def test_a_second_training_while_one_runs_is_refused(client: TestClient) -> None:
-    first = client.post("/api/train").json()["job"]
-    second = client.post("/api/train")
+    first = client.post("/api/train", json={}).json()["job"]
+    second = client.post("/api/train", json={})
     if client.get(f"/api/jobs/{first}").json()["status"] in ("queued", "running"):
         assert second.status_code == 409
     client.jobs.wait(first, timeout=300)  # type: ignore[attr-defined]

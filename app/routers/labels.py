@@ -4,11 +4,11 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
-from fastapi import APIRouter, Depends, HTTPException
+from fastapi import APIRouter, Depends, HTTPException, Path
 from pydantic import BaseModel, Field
 
 from app.dependencies import get_session
-from app.schemas import NOT_FOUND, History, Relabelled
+from app.schemas import NOT_FOUND, History, Relabelled, SegmentId
 from app.segment_views import segment_rows
 from app.session import Relabel, ReviewSession
 
@@ -23,7 +23,7 @@ class LabelBody(BaseModel):
 
 
 class BatchBody(BaseModel):
-    segments: list[int] = Field(min_length=1, max_length=100_000)
+    segments: list[SegmentId] = Field(min_length=1, max_length=100_000)
     label: LabelName
     expand: Literal["none", "component"] = "none"
     who: str | None = Field(default=None, max_length=100)
@@ -51,7 +51,9 @@ def _relabel(session: ReviewSession, ids: list[int], body: LabelBody | BatchBody
 
 
 @router.put("/segments/{segment_id}/label", response_model=Relabelled, responses=NOT_FOUND)
-def put_label(session: Session, segment_id: int, body: LabelBody) -> dict[str, Any]:
+def put_label(
+    session: Session, segment_id: Annotated[int, Path(ge=-(2**63), le=2**63 - 1)], body: LabelBody
+) -> dict[str, Any]:
     """Label every point of one segment."""
     return _relabel(session, [segment_id], body, "none")
 

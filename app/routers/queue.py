@@ -8,7 +8,7 @@ from fastapi import APIRouter, Depends, HTTPException, Query
 from pydantic import BaseModel, Field
 
 from app.dependencies import get_session
-from app.schemas import NOT_FOUND, Queue, Selection
+from app.schemas import NOT_FOUND, Queue, SegmentId, Selection
 from app.segment_views import review_queue
 from app.session import ReviewSession
 
@@ -17,7 +17,7 @@ Session = Annotated[ReviewSession, Depends(get_session)]
 
 
 class SelectionBody(BaseModel):
-    segments: list[int] = Field(max_length=100_000)
+    segments: list[SegmentId] = Field(max_length=100_000)
 
 
 @router.get("/queue", response_model=Queue)
