@@ -294,6 +294,28 @@ def test_a_missing_tile_is_named(copy: Path) -> None:
         load_drive(copy)
 
 
+def test_a_truncated_tile_is_a_named_error_for_every_command(
+    copy: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    tile = copy / "points" / "000002.laz"
+    tile.write_bytes(tile.read_bytes()[: tile.stat().st_size // 2])
+    with pytest.raises(DriveFormatError, match=r"000002\.laz: not a readable LAS/LAZ file"):
+        load_drive(copy)
+    capsys.readouterr()
+    assert main(["info", str(copy)]) == 2
+    err = capsys.readouterr().err
+    assert "DriveFormatError" in err and "000002.laz" in err and "Traceback" not in err
+
+
+def test_an_image_time_that_is_not_a_number_is_named(copy: Path) -> None:
+    path = copy / "images.json"
+    images = json.loads(path.read_text())
+    images[1]["gps_time"] = "soon"
+    path.write_text(json.dumps(images))
+    with pytest.raises(DriveFormatError, match=r"images\.json\[1\]: gps_time is not a number"):
+        open_drive(copy)
+
+
 def test_a_missing_truth_tile_is_named(copy: Path) -> None:
     (copy / "truth" / "points" / "000001.npz").unlink()
     with pytest.raises(MissingDriveFileError, match=r"000001\.npz"):

@@ -665,3 +665,30 @@ def test_a_long_delivery_imports_in_bounded_memory(tmp_path: Path) -> None:
     k = 37 * tile_points + np.arange(tile_points)
     np.testing.assert_allclose(points.gps_time, LONG_T0_S + k / MEASUREMENTS_HZ, rtol=0, atol=1e-7)
     np.testing.assert_array_equal(points.phase, k % (MEASUREMENTS_HZ / ROTATIONS_HZ))
+
+
+@pytest.mark.parametrize(("offset", "value"), [(131, float("nan")), (155, float("inf"))])
+def test_a_header_whose_scale_or_offset_is_not_a_number_is_refused_before_any_writing(
+    small: Delivery, tmp_path: Path, offset: int, value: float
+) -> None:
+    """LAS 1.2 header: the x scale factor at byte 131, the x offset at byte 155 (every coordinate
+    is integer * scale + offset, so none would be a number)."""
+    raw = bytearray(small.points.read_bytes())
+    raw[offset : offset + 8] = np.float64(value).tobytes()
+    broken = tmp_path / "broken.las"
+    broken.write_bytes(bytes(raw))
+    out = tmp_path / "drive"
+    with pytest.raises(SourceFormatError, match="scales .* and offsets .* must be finite"):
+        run_import(small, out, points=broken)
+    assert_nothing_left(out)
+
+
+def test_a_truncated_laz_is_a_named_error(small: Delivery, tmp_path: Path) -> None:
+    compressed = tmp_path / "cloud.laz"
+    laspy.read(str(small.points)).write(str(compressed))
+    data = compressed.read_bytes()
+    compressed.write_bytes(data[: len(data) // 2])
+    out = tmp_path / "drive"
+    with pytest.raises(SourceFormatError, match="not a readable LAS/LAZ file"):
+        run_import(small, out, points=compressed)
+    assert_nothing_left(out)

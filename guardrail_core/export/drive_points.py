@@ -19,7 +19,7 @@ import numpy as np
 from guardrail_core.errors import DriveDimensionError, DriveFormatError, MissingDriveFileError
 from guardrail_core.formats.drive import FORMAT_NAME, READS_MAJOR
 from guardrail_core.formats.drive_tiles import read_tile_index
-from guardrail_core.io.las import read_header_summary
+from guardrail_core.io.las import LAS_READ_ERRORS, read_header_summary
 
 
 @dataclass(frozen=True)
@@ -116,7 +116,7 @@ def read_point_file(file: PointFile) -> laspy.LasData:
     """
     try:
         las = laspy.read(str(file.path))
-    except (laspy.errors.LaspyException, OSError, ValueError) as exc:
+    except LAS_READ_ERRORS as exc:
         raise DriveFormatError(f"{file.path}: not a readable LAS/LAZ file ({exc})") from exc
     if len(las.points) != file.points:
         raise DriveDimensionError(

@@ -476,6 +476,8 @@ def _load_images(
             pose = _matrix(item["T_world_camera"], (4, 4), f"{where}.T_world_camera")
         except KeyError as exc:
             raise DriveFormatError(f"{where}: lacks the key {exc.args[0]!r}") from exc
+        except (TypeError, ValueError) as exc:
+            raise DriveFormatError(f"{where}: gps_time is not a number ({exc})") from exc
         if camera not in cameras:
             raise DriveFormatError(f"{where}: camera {camera!r} has no calibration in cameras.json")
         if not np.isfinite(gps_time):

@@ -31,7 +31,7 @@ from guardrail_core.errors import (
 )
 from guardrail_core.formats.drive import TRAJECTORY_COLUMNS
 from guardrail_core.importers.calibration import require_file
-from guardrail_core.io.las import SCALE_M
+from guardrail_core.io.las import LAS_READ_ERRORS, SCALE_M
 
 PathLike = str | os.PathLike
 
@@ -175,9 +175,6 @@ def read_image_list(path: PathLike) -> list[SourceImage]:
 
 # ---------------------------------------------------------------------------------- LAS files
 
-#: What laspy and lazrs raise on a file that is not LAS/LAZ or is cut short (lazrs: RuntimeError).
-_LAS_ERRORS = (laspy.errors.LaspyException, OSError, ValueError, RuntimeError)
-
 
 def las_crs(header: laspy.LasHeader) -> str | None:
     """The CRS a LAS header declares, as a string, without pyproj.
@@ -273,7 +270,7 @@ def scan_delivery_file(path: PathLike, given: int = 0) -> DeliveryFile:
                 if has_time and count
                 else (0.0, 0.0)
             )
-    except _LAS_ERRORS as exc:
+    except LAS_READ_ERRORS as exc:
         raise SourceFormatError(f"{path}: not a readable LAS/LAZ file ({exc})") from exc
     if not has_time:
         raise MissingGpsTimeError(
@@ -283,6 +280,13 @@ def scan_delivery_file(path: PathLike, given: int = 0) -> DeliveryFile:
         )
     if not all(math.isfinite(t) for t in times):
         raise SourceFormatError(f"{path}: its first or last point has a non-finite gps_time")
+    scales, offsets = np.asarray(header.scales, np.float64), np.asarray(header.offsets, np.float64)
+    if not (np.isfinite(scales).all() and (scales != 0).all() and np.isfinite(offsets).all()):
+        # Every coordinate is integer * scale + offset: none of them would be a number.
+        raise SourceFormatError(
+            f"{path}: the header's coordinate scales {scales.tolist()} and offsets "
+            f"{offsets.tolist()} must be finite numbers, the scales not zero"
+        )
     if count and times == (0.0, 0.0):
         raise MissingGpsTimeError(
             f"{path}: gps_time is zero at its first and its last point (never filled in)"
@@ -397,7 +401,7 @@ def read_file_chunks(file: DeliveryFile, chunk_points: int) -> Iterator[Delivery
                 points = next(chunks)
             except StopIteration:
                 return
-            except _LAS_ERRORS as exc:
+            except LAS_READ_ERRORS as exc:
                 raise SourceFormatError(
                     f"{file.path}: the points from number {start:,} on cannot be read ({exc})"
                 ) from exc

@@ -58,6 +58,10 @@ def write_points(
     las.write(str(path))
 
 
+#: What laspy and lazrs raise on a file that is not LAS/LAZ or is cut short (lazrs: RuntimeError).
+LAS_READ_ERRORS = (laspy.errors.LaspyException, OSError, ValueError, RuntimeError)
+
+
 def read_points(path: Path, origin: np.ndarray) -> dict[str, np.ndarray]:
     """Read a drive's LAS/LAZ file.
 
@@ -75,7 +79,7 @@ def read_points(path: Path, origin: np.ndarray) -> dict[str, np.ndarray]:
     """
     try:
         las = laspy.read(str(path))
-    except (laspy.errors.LaspyException, OSError, ValueError) as exc:
+    except LAS_READ_ERRORS as exc:
         raise DriveFormatError(f"{path}: not a readable LAS/LAZ file ({exc})") from exc
     names = set(las.point_format.dimension_names)
     if "gps_time" not in names:
@@ -121,5 +125,5 @@ def read_header_summary(
                 (float(lo[0]), float(lo[1]), float(lo[2])),
                 (float(hi[0]), float(hi[1]), float(hi[2])),
             )
-    except (laspy.errors.LaspyException, OSError, ValueError) as exc:
+    except LAS_READ_ERRORS as exc:
         raise DriveFormatError(f"{path}: not a readable LAS/LAZ file ({exc})") from exc
