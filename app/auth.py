@@ -7,6 +7,10 @@ import secrets
 
 from fastapi import HTTPException, Request, status
 
+#: The environment variable ``guardrail serve`` reads its token from (kept off the command line,
+#: which every user of the machine sees in ``ps``).
+TOKEN_ENV = "GUARDRAIL_TOKEN"
+
 
 def is_loopback(host: str) -> bool:
     """Whether ``host`` (a name or an address) only reaches this machine."""

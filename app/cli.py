@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import getpass
+import os
 from pathlib import Path
 
 
@@ -27,7 +28,12 @@ def add_serve_command(sub: argparse._SubParsersAction) -> None:
         "--scene-port", type=int, help="the 3D scene's port (default: the app's port + 1)"
     )
     serve.add_argument(
-        "--token", help="secret every API call must carry; required beyond 127.0.0.1"
+        "--token",
+        help="secret every API call must carry; required beyond 127.0.0.1. Visible to every "
+        "user of the machine (ps): prefer --token-file or $GUARDRAIL_TOKEN",
+    )
+    serve.add_argument(
+        "--token-file", type=Path, metavar="FILE", help="read the token from FILE's first line"
     )
     serve.add_argument(
         "--allowed-host",
@@ -59,7 +65,7 @@ def add_serve_command(sub: argparse._SubParsersAction) -> None:
 
 
 def _serve(args: argparse.Namespace) -> int:
-    from app.serve import serve  # viser and uvicorn load only when serving
+    from app.serve import serve, token_from  # viser and uvicorn load only when serving
 
     serve(
         args.drive,
@@ -68,7 +74,7 @@ def _serve(args: argparse.Namespace) -> int:
         allowed_hosts=args.allowed_host,
         port=args.port,
         scene_port=args.scene_port,
-        token=args.token,
+        token=token_from(args.token, args.token_file, os.environ),
         operator=args.operator or getpass.getuser(),
         model_dir=args.model,
         review_dir=args.review_dir,

@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import secrets
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import uvicorn
 import viser
 
-from app.auth import is_loopback
+from app.auth import TOKEN_ENV, is_loopback
 from app.jobs import JobRunner
 from app.main import create_app
 from app.request_guard import allowed_hosts_for
@@ -38,6 +38,47 @@ def default_run(drive: Path) -> Path:
 
 def new_token() -> str:
     return secrets.token_urlsafe(18)
+
+
+#: The 3D scene's window along the trajectory, metres, and its point budget: every scene client
+#: receives the window's points (about 15 bytes each), so both are bounded.
+WINDOW_RANGE_M = (1.0, 1000.0)
+POINT_BUDGET_RANGE = (1000, 2_000_000)
+
+
+def check_scene_options(window_m: float, point_budget: int) -> None:
+    """Raise :class:`InvalidOptionError` for a scene window or point budget out of range."""
+    lo, hi = WINDOW_RANGE_M
+    if not lo <= window_m <= hi:  # NaN fails too
+        raise InvalidOptionError(f"--window: expected {lo:g} to {hi:g} metres, got {window_m}")
+    lo_n, hi_n = POINT_BUDGET_RANGE
+    if not lo_n <= point_budget <= hi_n:
+        raise InvalidOptionError(
+            f"--point-budget: expected {lo_n} to {hi_n} points, got {point_budget}"
+        )
+
+
+def token_from(flag: str | None, file: Path | None, environ: Mapping[str, str]) -> str | None:
+    """The server's token: ``--token``, else the first line of ``--token-file``, else
+    ``$GUARDRAIL_TOKEN``; None when none is given.
+
+    Raises
+    ------
+    InvalidOptionError
+        Both the flag and the file, an unreadable file, or an empty token.
+    """
+    if flag is not None and file is not None:
+        raise InvalidOptionError("give --token or --token-file, not both")
+    if file is not None:
+        try:
+            lines = Path(file).read_text(encoding="utf-8").splitlines()
+        except (OSError, UnicodeDecodeError) as exc:
+            raise InvalidOptionError(f"--token-file {file}: cannot read it ({exc})") from exc
+        flag = lines[0].strip() if lines else ""
+    token = flag if flag is not None else environ.get(TOKEN_ENV)
+    if token is not None and not token.strip():
+        raise InvalidOptionError("the token is empty")
+    return token
 
 
 def serve(
@@ -72,8 +113,9 @@ def serve(
     Raises
     ------
     InvalidOptionError
-        A host beyond the loopback without a token.
+        A host beyond the loopback without a token; a window or point budget out of range.
     """
+    check_scene_options(window_m, point_budget)
     if not is_loopback(host) and not token:
         raise InvalidOptionError(
             f"--host {host} serves beyond this machine: give --token (any secret string) so that "
@@ -105,7 +147,8 @@ def serve(
         allowed_hosts=allowed_hosts_for(host, allowed_hosts),
     )
     shown = "127.0.0.1" if host in ("0.0.0.0", "::") else host
-    query = f"?token={token}" if token else ""
+    # The token is never printed whole (terminals are logged and shared).
+    query = f"?token={token[:2]}… (your token)" if token else ""
     print(f"review app: http://{shown}:{port}/{query}", flush=True)
     print(f"3D scene:   http://{shown}:{scene_port}", flush=True)
     print(f"labels:     {session.store.path}", flush=True)

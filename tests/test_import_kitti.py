@@ -136,6 +136,7 @@ def test_default_frames_are_the_scans_present(tmp_path: Path) -> None:
             SourceFormatError,
             "16 bytes",
         ),
+        (lambda s: (s / "velodyne" / "000001.bin").write_bytes(b""), SourceFormatError, "empty"),
         (lambda s: (s / "image_2").mkdir(), MissingSourceFileError, "image_2"),
     ],
 )

@@ -210,6 +210,8 @@ def read_scan(path: Path) -> np.ndarray:
         raise SourceFormatError(
             f"{path}: {size} bytes is not a whole number of points (16 bytes: 4 float32 each)"
         )
+    if size == 0:
+        raise SourceFormatError(f"{path}: the scan is empty (no points)")
     scan = np.fromfile(path, dtype="<f4").reshape(-1, 4)
     if not np.all(np.isfinite(scan)):
         raise SourceFormatError(f"{path}: contains NaN or infinity")
