@@ -3,6 +3,12 @@
 A job runs on a single worker thread so that two trainings never compete for the two cores; the
 REST API polls its progress. A job that fails keeps its error message; nothing it was writing is
 half-written (model folders and run folders are written atomically by guardrail_core).
+
+Jobs are bounded: at most one queued or running job of a kind (:class:`JobBusyError` for a
+second), each with a time limit (:data:`TIME_LIMIT_S`), and cancellable. A thread cannot be
+stopped from outside, so a job stops where it next reports its progress: ``report`` raises
+:class:`JobCancelled` (or :class:`JobTimeLimitError`), and the job's writer throws its staging
+folder away.
 """
 
 from __future__ import annotations
@@ -19,18 +25,41 @@ from typing import Any
 #: A job's work: called with a ``report(fraction, message)`` function, returns its JSON result.
 Work = Callable[[Callable[[float, str], None]], dict[str, Any]]
 
+#: Seconds a job of a kind may run (a full fine-tune on the CPU takes minutes; a reconstruction of
+#: a few hundred metres seconds); other kinds: :data:`DEFAULT_TIME_LIMIT_S`.
+TIME_LIMIT_S = {"train": 3600.0, "reconstruct": 900.0}
+DEFAULT_TIME_LIMIT_S = 900.0
+
+
+class JobCancelled(Exception):
+    """Raised inside a job's work, at its next progress report, once it is cancelled."""
+
+
+class JobTimeLimitError(Exception):
+    """Raised inside a job's work, at its next progress report, past its time limit."""
+
+
+class JobBusyError(Exception):
+    """A job of that kind is already queued or running."""
+
+    def __init__(self, job: Job) -> None:
+        super().__init__(f"a {job.kind} job is already {job.status} (job {job.id})")
+        self.job = job
+
 
 @dataclass
 class Job:
     id: str
     kind: str
-    status: str = "queued"  # queued | running | done | failed
+    status: str = "queued"  # queued | running | done | failed | cancelled
     progress: float = 0.0
     message: str = ""
     error: str | None = None
     result: dict[str, Any] | None = None
     created: float = field(default_factory=time.time)
     finished: float | None = None
+    time_limit_s: float = DEFAULT_TIME_LIMIT_S
+    cancel_requested: bool = False
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -53,10 +82,42 @@ class JobRunner:
         self._lock = threading.Lock()
 
     def submit(self, kind: str, work: Work) -> Job:
-        job = Job(id=uuid.uuid4().hex[:12], kind=kind)
+        """Queue ``work`` as a job of ``kind``.
+
+        Raises
+        ------
+        JobBusyError
+            A job of that kind is queued or running (the queue holds one per kind).
+        """
+        job = Job(
+            id=uuid.uuid4().hex[:12],
+            kind=kind,
+            time_limit_s=TIME_LIMIT_S.get(kind, DEFAULT_TIME_LIMIT_S),
+        )
         with self._lock:
+            for other in self._jobs.values():
+                if other.kind == kind and other.status in ("queued", "running"):
+                    raise JobBusyError(other)
             self._jobs[job.id] = job
         self._pool.submit(self._run, job, work)
+        return job
+
+    def cancel(self, job_id: str) -> Job:
+        """Ask a job to stop: a queued job never starts, a running one stops at its next
+        progress report.
+
+        Raises
+        ------
+        KeyError
+            No such job.
+        """
+        with self._lock:
+            job = self._jobs[job_id]
+            if job.status == "queued":
+                job.status, job.message, job.finished = "cancelled", "cancelled", time.time()
+            elif job.status == "running":
+                job.cancel_requested = True
+                job.message = "cancelling"
         return job
 
     def get(self, job_id: str) -> Job | None:
@@ -78,18 +139,30 @@ class JobRunner:
         return None
 
     def _run(self, job: Job, work: Work) -> None:
+        deadline = time.monotonic() + job.time_limit_s
+
         def report(fraction: float, message: str) -> None:
+            if job.cancel_requested:
+                raise JobCancelled
+            if time.monotonic() > deadline:
+                raise JobTimeLimitError(f"the job ran past its limit of {job.time_limit_s:g} s")
             job.progress = min(max(float(fraction), 0.0), 1.0)
             job.message = message
 
-        job.status = "running"
+        with self._lock:
+            if job.status == "cancelled":  # cancelled while queued
+                return
+            job.status = "running"
         try:
             job.result = work(report)
+        except JobCancelled:
+            job.status, job.message = "cancelled", "cancelled"
         except Exception as exc:  # a job's failure is reported, never lost in a thread
             job.error = f"{type(exc).__name__}: {exc}"
             job.message = "failed"
             job.status = "failed"
-            traceback.print_exc()
+            if not isinstance(exc, JobTimeLimitError):
+                traceback.print_exc()
         else:
             job.progress = 1.0
             job.status = "done"
@@ -103,7 +176,7 @@ class JobRunner:
             job = self.get(job_id)
             if job is None:
                 raise KeyError(job_id)
-            if job.status in ("done", "failed"):
+            if job.status in ("done", "failed", "cancelled"):
                 return job
             if time.monotonic() > deadline:
                 raise TimeoutError(f"job {job_id} still {job.status} after {timeout} s")

@@ -85,6 +85,9 @@ def reconstruct(
             origin=drive.origin,
             crs=drive.crs,
             params=params,
+            on_run=lambda done, runs: report(
+                0.05 + 0.9 * done / max(runs, 1), f"reconstructing: run {done} of {runs}"
+            ),
         )
         session.notify("reconstruction", np.zeros(0, np.int64))
         return {"summary": summary.to_json()}

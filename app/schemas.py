@@ -291,7 +291,7 @@ class Job(ResponseModel):
 
     id: str
     kind: Literal["train", "reconstruct"]
-    status: Literal["queued", "running", "done", "failed"]
+    status: Literal["queued", "running", "done", "failed", "cancelled"]
     progress: float = Field(description="0..1")
     message: str
     error: str | None

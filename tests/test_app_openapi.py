@@ -214,7 +214,13 @@ def test_the_pages_fields_have_their_types(spec: dict[str, Any]) -> None:
     assert reason is not None and set(reason["enum"]) == {"disagrees", "uncertain"}
     job = _success(spec["paths"]["/api/jobs/{job_id}"]["get"])["application/json"]["schema"]
     status = _field(spec, job, "status")
-    assert status is not None and set(status["enum"]) == {"queued", "running", "done", "failed"}
+    assert status is not None and set(status["enum"]) == {
+        "queued",
+        "running",
+        "done",
+        "failed",
+        "cancelled",
+    }
     progress = _field(spec, job, "progress")
     assert progress is not None and progress["type"] == "number"
 

@@ -11,7 +11,7 @@ from pydantic import BaseModel, Field
 
 from app import review_jobs
 from app.dependencies import get_jobs, get_session
-from app.jobs import JobRunner
+from app.jobs import JobBusyError, JobRunner
 from app.schemas import CONFLICT, NOT_FOUND, Downloads, JobStarted, Reconstruction, file_response
 from app.session import ReviewSession
 from guardrail_core.errors import InvalidOptionError, NoReconstructionError, RunFolderError
@@ -89,7 +89,9 @@ class ApplyBody(BaseModel):
     params: dict[str, dict[str, Any]] = Field(default_factory=dict)
 
 
-@router.post("/reconstruction/apply", status_code=202, response_model=JobStarted)
+@router.post(
+    "/reconstruction/apply", status_code=202, response_model=JobStarted, responses=CONFLICT
+)
 def post_apply(session: Session, jobs: Jobs, body: ApplyBody) -> dict[str, Any]:
     """Reconstruct every guardrail again from the current labels with these parameters (by
     stage, as in ``models.json``; missing ones keep their defaults); poll the job."""
@@ -97,4 +99,7 @@ def post_apply(session: Session, jobs: Jobs, body: ApplyBody) -> dict[str, Any]:
         params = ReconstructionParams.from_json(body.params)
     except InvalidOptionError as exc:
         raise HTTPException(422, detail=str(exc)) from exc
-    return {"job": jobs.submit("reconstruct", review_jobs.reconstruct(session, params)).id}
+    try:
+        return {"job": jobs.submit("reconstruct", review_jobs.reconstruct(session, params)).id}
+    except JobBusyError as exc:
+        raise HTTPException(409, detail=str(exc)) from exc

@@ -9,7 +9,7 @@ from pydantic import BaseModel
 
 from app import review_jobs
 from app.dependencies import get_jobs, get_session
-from app.jobs import JobRunner
+from app.jobs import JobBusyError, JobRunner
 from app.model_registry import UnknownModelError
 from app.schemas import CONFLICT, NOT_FOUND, Activated, Job, JobList, JobStarted, ModelList
 from app.session import ReviewSession
@@ -38,7 +38,10 @@ def post_train(session: Session, jobs: Jobs, body: TrainBody | None = None) -> d
     work = review_jobs.fine_tune(
         session, mode=body.mode, include_unreviewed=body.include_unreviewed
     )
-    return {"job": jobs.submit("train", work).id}
+    try:
+        return {"job": jobs.submit("train", work).id}
+    except JobBusyError as exc:
+        raise HTTPException(409, detail=str(exc)) from exc
 
 
 # exclude_unset: metrics of older model folders lack some fields (see app.schemas)
@@ -57,6 +60,23 @@ def get_job(jobs: Jobs, job_id: str) -> dict[str, Any]:
     if job is None:
         raise HTTPException(404, detail=f"no job {job_id}")
     return job.to_json()
+
+
+@router.delete(
+    "/jobs/{job_id}",
+    response_model=Job,
+    response_model_exclude_unset=True,
+    responses={**NOT_FOUND, **CONFLICT},
+)
+def delete_job(jobs: Jobs, job_id: str) -> dict[str, Any]:
+    """Cancel a job: a queued one never starts, a running one stops at its next progress report
+    (its status turns ``cancelled``; what it was writing is thrown away); 409 once it ended."""
+    job = jobs.get(job_id)
+    if job is None:
+        raise HTTPException(404, detail=f"no job {job_id}")
+    if job.status not in ("queued", "running"):
+        raise HTTPException(409, detail=f"job {job_id} already ended ({job.status})")
+    return jobs.cancel(job_id).to_json()
 
 
 @router.get("/models", response_model=ModelList, response_model_exclude_unset=True)

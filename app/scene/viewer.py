@@ -21,7 +21,7 @@ import viser
 import viser.transforms as vtf
 
 from app import review_jobs
-from app.jobs import JobRunner
+from app.jobs import JobBusyError, JobRunner
 from app.scene.colours import COLOUR_MODES, point_colours
 from app.scene.picking import in_rectangle, pick_along_ray, project_to_screen
 from app.scene.tuning import TUNABLE, RunTuner, with_value
@@ -527,7 +527,11 @@ class ReviewScene:
         if self._tuner is None or self.jobs is None:
             return
         params = self.slider_params()
-        job = self.jobs.submit("reconstruct", review_jobs.reconstruct(self.session, params))
+        try:
+            job = self.jobs.submit("reconstruct", review_jobs.reconstruct(self.session, params))
+        except JobBusyError as exc:
+            self._tune_text.content = f"not now: {exc}"
+            return
         self._tune_text.content = f"reconstructing the drive (job {job.id})…"
 
 

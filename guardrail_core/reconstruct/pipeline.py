@@ -20,7 +20,7 @@ import json
 import os
 import time
 import typing
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -458,6 +458,7 @@ def reconstruct_guardrails(
     params: ReconstructionParams = ReconstructionParams(),
     max_units: int | None = None,
     progress: bool = False,
+    on_run: Callable[[int, int], None] | None = None,
 ) -> Reconstruction:
     """Reconstruct every guardrail run of a drive.
 
@@ -468,6 +469,8 @@ def reconstruct_guardrails(
     ground : (N,) bool: the points of the road surface (the ground of the poles)
     trajectory : (T, 3) float64: the vehicle's positions (which side the road is on)
     max_units : superimpose only the first this many units of each run (§5.2)
+    on_run : called with (runs done, runs) before the first run and after each (what it raises
+        stops the reconstruction: a cancelled job)
     """
     xyz = np.asarray(xyz, np.float64)
     if xyz.ndim != 2 or xyz.shape[1] != 3:
@@ -475,10 +478,13 @@ def reconstruct_guardrails(
     runs = split_runs(
         xyz[np.asarray(guardrail, bool)], xyz[np.asarray(ground, bool)], trajectory, params
     )
-    results = [
-        reconstruct_run_input(run, params, max_units)
-        for run in tqdm(runs, desc="reconstruct", unit="run", disable=not progress)
-    ]
+    results = []
+    for done, run in enumerate(tqdm(runs, desc="reconstruct", unit="run", disable=not progress)):
+        if on_run is not None:
+            on_run(done, len(runs))
+        results.append(reconstruct_run_input(run, params, max_units))
+    if on_run is not None:
+        on_run(len(runs), len(runs))
     return Reconstruction([m for m, _ in results], [s for _, s in results])
 
 
@@ -561,6 +567,7 @@ def reconstruct_into(
     params: ReconstructionParams = ReconstructionParams(),
     inputs: Iterable[str | os.PathLike] = (),
     progress: bool = False,
+    on_run: Callable[[int, int], None] | None = None,
 ) -> ReconstructionSummary:
     """Reconstruct a run's guardrails and (re)place ``run_dir/reconstruction`` whole.
 
@@ -569,7 +576,8 @@ def reconstruct_into(
     the previous reconstruction as it was. ``inputs`` are the files the arrays came from (the
     drive's parts, :func:`guardrail_core.formats.drive.drive_parts`); they and the run's own
     tables must lie outside ``reconstruction/``, else
-    :class:`~guardrail_core.errors.InputInsideOutputError` is raised before any work.
+    :class:`~guardrail_core.errors.InputInsideOutputError` is raised before any work. ``on_run``:
+    see :func:`reconstruct_guardrails`.
     """
     from guardrail_core.formats.run_folder import POINT_ROAD
 
@@ -585,6 +593,7 @@ def reconstruct_into(
             trajectory,
             params=params,
             progress=progress,
+            on_run=on_run,
         )
         seconds = round(time.perf_counter() - start, 4)
         summary = write_reconstruction(

@@ -430,9 +430,10 @@ function pollJob(jobId, failures) {
       return;
     }
     renderJob(job);
-    if (job.status === "done" || job.status === "failed") {
+    if (job.status === "done" || job.status === "failed" || job.status === "cancelled") {
       $("train").disabled = false;
       if (job.status === "done") showComparison(job.result);
+      else if (job.status === "cancelled") toast("fine-tuning cancelled", "info");
       else toast(`fine-tuning failed: ${job.error ?? "unknown error"}`, "error");
       return;
     }
