@@ -189,6 +189,8 @@ def _checked(owner: str, f: dataclasses.Field, kind: Any, value: Any) -> Any:
             value = int(value)
         if isinstance(value, bool) or not isinstance(value, int):
             raise ParameterError(f"{where} must be an integer, got {value!r}")
+        if not -(2**63) <= value < 2**63:  # what numpy's int64 (and every table) holds
+            raise ParameterError(f"{where} must fit in 64 bits, got {value:.3g}")
     elif kind is float:
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise ParameterError(f"{where} must be a number, got {value!r}")

@@ -144,3 +144,16 @@ def test_header_parsing() -> None:
     assert origin_netloc("null") == "" and origin_netloc("file://") == ""
     hosts = allowed_hosts_for("0.0.0.0", ["review.example"])
     assert {"127.0.0.1", "localhost", "::1", "review.example"} <= hosts
+
+
+def test_reconstruction_parameters_out_of_range_are_a_422_and_start_nothing(client: TestClient):
+    for params in (
+        {"pipes": {"slice_interval_m": 1e-5}},  # minutes and 4 GB before
+        {"pipes": {"slice_interval_m": -1}},
+        {"pipes": {"slice_interval_m": "abc"}},
+        {"pipes": {"slice_interval_m": None}},
+        {"poles": {"min_circle_points": 1e308}},
+    ):
+        answer = client.post("/api/reconstruction/apply", json={"params": params})
+        assert answer.status_code == 422, params
+    assert client.get("/api/jobs").json()["items"] == []

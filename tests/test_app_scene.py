@@ -139,6 +139,17 @@ def test_retuning_a_run_changes_its_model_and_keeps_the_run_folder(
     assert isinstance(as_int.pipes.taubin_iterations, int)
     assert (session.run.root / "reconstruction" / "models.json").read_bytes() == before
 
+    # A scene client may send any value: the reconstruction gets the slider's own range.
+    sliders = scene._sliders
+    sliders[("pipes", "slice_interval_m")].value = 0.5  # the slider's maximum is 0.1
+    sliders[("pipes", "taubin_iterations")].value = 400  # ... 40
+    sliders[("pipes", "histogram_factor")].value = float("nan")
+    clamped = scene.slider_params()
+    assert clamped.pipes.slice_interval_m == 0.1 and clamped.pipes.taubin_iterations == 40
+    assert clamped.pipes.histogram_factor == tuner.params.pipes.histogram_factor
+    for key, slider in sliders.items():
+        slider.value = getattr(getattr(tuner.params, key[0]), key[1])
+
     scene._run_choice.value = scene._run_choice.options[0]
     seconds = scene.retune()
     assert seconds is not None and seconds < 5.0

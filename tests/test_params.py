@@ -141,6 +141,21 @@ def test_a_value_just_outside_every_range_is_refused_by_name() -> None:
     assert unnamed == []
 
 
+def test_an_integer_beyond_64_bits_is_refused_by_every_integer_field() -> None:
+    """1e308 is an integral float: it once became a 309-digit count and was saved."""
+    checked = 0
+    for cls in stage_params_classes():
+        hints = typing.get_type_hints(cls)
+        for spec in cls.specs():
+            if hints[spec.name] is not int:
+                continue
+            for value in (1e308, 2**63, -(2**63) - 1):
+                checked += 1
+                with pytest.raises(ParameterError, match=f"{cls.__name__}.{spec.name}"):
+                    cls(**{spec.name: value})
+    assert checked > 30
+
+
 def test_defaults_round_trip_through_json() -> None:
     for cls in reconstruction_classes():
         params = cls()

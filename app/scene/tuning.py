@@ -8,6 +8,7 @@ The sliders of the 3D scene change a few reconstruction parameters; each change 
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 import time
 from dataclasses import dataclass
@@ -34,6 +35,16 @@ TUNABLE: dict[tuple[str, str], tuple[str, float, float, float]] = {
     ("pipes", "taubin_iterations"): ("smoothing passes (Taubin)", 0, 40, 1),
     ("beams", "slice_interval_m"): ("beam slice interval (m)", 0.005, 0.05, 0.005),
 }
+
+
+def slider_value(key: tuple[str, str], value: object, default: float) -> float:
+    """A slider's value as the reconstruction takes it: within the slider's own range. A scene
+    client sends what it likes (a slider at 0.5 whose maximum is 0.1), so the value is clamped
+    to the range, and one that is not a finite number gives ``default``."""
+    _, lo, hi, _ = TUNABLE[key]
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        return default
+    return min(max(float(value), lo), hi)
 
 
 def with_value(

@@ -24,7 +24,7 @@ from app import review_jobs
 from app.jobs import JobBusyError, JobRunner
 from app.scene.colours import COLOUR_MODES, point_colours
 from app.scene.picking import in_rectangle, pick_along_ray, project_to_screen
-from app.scene.tuning import TUNABLE, RunTuner, with_value
+from app.scene.tuning import TUNABLE, RunTuner, slider_value, with_value
 from app.scene.window import window_points
 from app.segment_views import review_queue
 from app.session import ReviewSession
@@ -465,7 +465,9 @@ class ReviewScene:
         tuner = self._tuner
         params = tuner.params if tuner is not None else ReconstructionParams()
         for (stage, name), slider in self._sliders.items():
-            params = with_value(params, stage, name, slider.value)
+            default = float(getattr(getattr(params, stage), name))
+            value = slider_value((stage, name), slider.value, default)
+            params = with_value(params, stage, name, value)
         return params
 
     def retune(self) -> float | None:

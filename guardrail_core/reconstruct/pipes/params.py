@@ -236,7 +236,12 @@ class PipeParams(StageParams):
 
     # -- slices, components and their chains (§4.3, Fig. 16) --------------------------------------
     slice_interval_m: float = param(
-        0.03, unit="m", gt=0, doc="Width of the slices along x (§4.3: 30 mm)."
+        0.03,
+        unit="m",
+        ge=0.005,
+        le=1.0,
+        doc="Width of the slices along x (§4.3: 30 mm); below 5 mm a unit's slices hold too few "
+        "points to fit, and the work grows without bound (1e-5 m took minutes and 4 GB).",
     )
     max_edge_m: float = param(
         0.03,
