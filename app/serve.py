@@ -7,12 +7,12 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import uvicorn
-import viser
 
 from app.auth import TOKEN_ENV, is_loopback
 from app.jobs import JobRunner
 from app.main import create_app
 from app.request_guard import allowed_hosts_for
+from app.scene.guarded_server import guarded_viser_server
 from app.scene.viewer import ReviewScene
 from app.session import ReviewSession
 from guardrail_core.errors import InvalidOptionError, RunFolderError
@@ -128,7 +128,8 @@ def serve(
         drive, run, review_dir=review_dir, operator=operator, model_dir=model_dir
     )
     jobs = JobRunner()
-    server = viser.ViserServer(host=host, port=scene_port, verbose=False)
+    hosts = allowed_hosts_for(host, allowed_hosts)
+    server = guarded_viser_server(host, scene_port, allowed_hosts=hosts, token=token)
     server.gui.configure_theme(control_width="large", show_share_button=False)
     ReviewScene(
         session,
@@ -144,7 +145,7 @@ def serve(
         jobs=jobs,
         scene_port=scene_port,
         scene_clients=lambda: len(server.get_clients()),
-        allowed_hosts=allowed_hosts_for(host, allowed_hosts),
+        allowed_hosts=hosts,
     )
     shown = "127.0.0.1" if host in ("0.0.0.0", "::") else host
     # The token is never printed whole (terminals are logged and shared).

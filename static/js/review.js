@@ -88,6 +88,13 @@ function sceneSrc(url) {
     if (local.includes(u.hostname) && !local.includes(window.location.hostname)) {
       u.hostname = window.location.hostname;
     }
+    if (api.token) {
+      // The scene's websocket needs the token too: viser connects to ?websocket= when given.
+      const ws = new URL(u.href);
+      ws.protocol = u.protocol === "https:" ? "wss:" : "ws:";
+      ws.search = `?token=${encodeURIComponent(api.token)}`;
+      u.searchParams.set("websocket", ws.href);
+    }
     return u.href;
   } catch {
     return url;
