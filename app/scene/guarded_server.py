@@ -94,8 +94,8 @@ def _wrapped_process_request(check: Callable[[Any, str], str | None]) -> Iterato
 
         return original(*args, process_request=guarded, **kwargs)
 
-    ws_server.serve = serve  # type: ignore[assignment]
+    ws_server.serve = serve  # type: ignore[misc,assignment]
     try:
         yield
     finally:
-        ws_server.serve = original  # type: ignore[assignment]
+        ws_server.serve = original  # type: ignore[misc,assignment]
