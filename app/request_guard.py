@@ -7,8 +7,9 @@ changes from its own pages only, and JSON bodies of bounded size.
   other than the server's own is refused (403): a page of another site cannot relabel, train or
   activate a model through the operator's browser. Clients that are not browsers send no
   ``Origin`` and pass (the token, when the server has one, still applies).
-- **JSON only**: such a request must say ``Content-Type: application/json`` (415 otherwise). An
-  HTML form cannot, so a cross-site form fails even where a browser leaves ``Origin`` out.
+- **JSON only**: such a request must say ``Content-Type: application/json``, or carry neither a
+  body nor a type (415 otherwise). An HTML form always names its encoding (form or text), so a
+  cross-site form fails even where a browser leaves ``Origin`` out.
 - **Size**: a body over :data:`MAX_BODY_BYTES` is refused with 413, by its ``Content-Length``
   before it is read, or as it streams in.
 """
@@ -77,7 +78,9 @@ class RequestGuard:
         if origin is not None and origin_netloc(origin) != host.lower():
             return 403, f"a request from another origin ({origin[:100]!r}) may not change anything"
         media_type = headers.get("content-type", "").split(";")[0].strip().lower()
-        if media_type != "application/json":
+        bodyless = headers.get("content-length", "0") == "0" and "transfer-encoding" not in headers
+        # A form always names its encoding: only JSON, or nothing at all (no body, no type), passes.
+        if media_type != "application/json" and not (media_type == "" and bodyless):
             return 415, "a request that changes something must send Content-Type: application/json"
         length = headers.get("content-length")
         if length is not None and (not length.isdigit() or int(length) > self.max_body_bytes):

@@ -47,9 +47,11 @@ def error_response(status: int, description: str) -> dict[int | str, Any]:
     return {status: {"model": ErrorDetail, "description": description}}
 
 
-#: A segment id in a request: any number the run's int64 tables can hold (a larger one is a 422,
-#: not an overflow; one the run does not have is a 404).
-SegmentId = Annotated[int, Field(ge=-(2**63), le=2**63 - 1)]
+#: The largest segment id a request may carry: 2**53, the largest integer a JSON number (a double)
+#: holds exactly, so the schema states its bound exactly too; far inside int64 (a larger id is a
+#: 422, not an overflow; one the run does not have is a 404).
+MAX_SEGMENT_ID = 2**53
+SegmentId = Annotated[int, Field(ge=-MAX_SEGMENT_ID, le=MAX_SEGMENT_ID)]
 
 JPEG = file_response(["image/jpeg"], "The image (JPEG)")
 NOT_FOUND = error_response(404, "No such object (the detail names it)")

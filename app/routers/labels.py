@@ -8,7 +8,7 @@ from fastapi import APIRouter, Depends, HTTPException, Path
 from pydantic import BaseModel, Field
 
 from app.dependencies import get_session
-from app.schemas import NOT_FOUND, History, Relabelled, SegmentId
+from app.schemas import MAX_SEGMENT_ID, NOT_FOUND, History, Relabelled, SegmentId
 from app.segment_views import segment_rows
 from app.session import Relabel, ReviewSession
 
@@ -52,7 +52,9 @@ def _relabel(session: ReviewSession, ids: list[int], body: LabelBody | BatchBody
 
 @router.put("/segments/{segment_id}/label", response_model=Relabelled, responses=NOT_FOUND)
 def put_label(
-    session: Session, segment_id: Annotated[int, Path(ge=-(2**63), le=2**63 - 1)], body: LabelBody
+    session: Session,
+    segment_id: Annotated[int, Path(ge=-MAX_SEGMENT_ID, le=MAX_SEGMENT_ID)],
+    body: LabelBody,
 ) -> dict[str, Any]:
     """Label every point of one segment."""
     return _relabel(session, [segment_id], body, "none")
