@@ -33,6 +33,16 @@ from guardrail_core.review.training import (
 )
 
 
+@pytest.fixture(scope="module")
+def run_path(run_path: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """This module's copy of the session's run: training and re-predicting embed the crops the
+    pipeline did not ask about and save them in the run (review/run_crops.py), which would change
+    the session's run under the other modules' tests."""
+    out = tmp_path_factory.mktemp("review_training") / "run"
+    shutil.copytree(run_path, out)
+    return out
+
+
 @pytest.fixture
 def run_copy(run_path: Path, tmp_path: Path) -> Path:
     out = tmp_path / "run"
