@@ -130,14 +130,6 @@ class JobRunner:
             jobs = [j for j in self._jobs.values() if kind is None or j.kind == kind]
         return sorted(jobs, key=lambda j: j.created, reverse=True)
 
-    def busy(self, kind: str) -> Job | None:
-        """A queued or running job of that kind, if any."""
-        with self._lock:
-            for job in self._jobs.values():
-                if job.kind == kind and job.status in ("queued", "running"):
-                    return job
-        return None
-
     def _run(self, job: Job, work: Work) -> None:
         deadline = time.monotonic() + job.time_limit_s
 

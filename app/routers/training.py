@@ -32,9 +32,6 @@ def post_train(session: Session, jobs: Jobs, body: TrainBody | None = None) -> d
     others take the run's corrected label.
     """
     body = body or TrainBody()
-    running = jobs.busy("train")
-    if running is not None:
-        raise HTTPException(409, detail=f"a training is already running (job {running.id})")
     work = review_jobs.fine_tune(
         session, mode=body.mode, include_unreviewed=body.include_unreviewed
     )

@@ -13,6 +13,7 @@ The scene's static files stay readable, like the review app's pages.
 
 from __future__ import annotations
 
+import functools
 import http
 import secrets
 import threading
@@ -34,18 +35,10 @@ def guarded_viser_server(
 ) -> viser.ViserServer:
     """A :class:`viser.ViserServer` on ``host:port`` whose websocket handshakes pass
     :func:`handshake_refusal` first."""
-    check = _Handshake(allowed_hosts, token)
+    hosts = None if allowed_hosts is None else {h.lower() for h in allowed_hosts}
+    check = functools.partial(handshake_refusal, allowed_hosts=hosts, token=token)
     with _START_LOCK, _wrapped_process_request(check):
         return viser.ViserServer(host=host, port=port, verbose=False)
-
-
-class _Handshake:
-    def __init__(self, allowed_hosts: Collection[str] | None, token: str | None) -> None:
-        self.allowed_hosts = None if allowed_hosts is None else {h.lower() for h in allowed_hosts}
-        self.token = token
-
-    def __call__(self, headers: Any, path: str) -> str | None:
-        return handshake_refusal(headers, path, self.allowed_hosts, self.token)
 
 
 def handshake_refusal(
