@@ -9,6 +9,7 @@ import shutil
 from pathlib import Path
 from typing import Any
 
+import cv2
 import laspy
 import numpy as np
 import pytest
@@ -358,3 +359,27 @@ def test_a_malformed_index_is_a_format_error_naming_it(copy: Path, edit, message
     path = _edit_index(copy, edit)
     with pytest.raises(DriveFormatError, match=re.escape(str(path)) + ".*" + message):
         load_drive(copy)
+
+
+@pytest.mark.parametrize("file", ["/etc/hostname", "images/../../outside.jpg"])
+def test_an_image_path_outside_the_drive_is_refused(copy: Path, file: str) -> None:
+    path = copy / "images.json"
+    images = json.loads(path.read_text())
+    images[0]["file"] = file
+    path.write_text(json.dumps(images))
+    with pytest.raises(DriveFormatError, match=r"images\.json\[0\]: file .* inside the drive"):
+        open_drive(copy)
+
+
+def test_info_decodes_every_image(copy: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    images = json.loads((copy / "images.json").read_text())
+    (copy / images[1]["file"]).write_bytes(b"not an image at all")
+    small = cv2.imread(str(copy / images[2]["file"]))
+    cv2.imwrite(str(copy / images[2]["file"]), small[::2, ::2])
+    open_drive(copy)  # opening only checks that the files exist; info decodes them
+    assert main(["info", str(copy)]) == 2
+    err = capsys.readouterr().err
+    assert "DriveFormatError" in err and "Traceback" not in err
+    assert f"2 of {len(images)} images are bad" in err
+    assert f"{images[1]['file']}: not a readable image" in err
+    assert f"{images[2]['file']}: about" in err and "is calibrated for" in err

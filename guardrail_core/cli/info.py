@@ -12,7 +12,10 @@ def add_parser(subparsers: common.Subparsers) -> None:
     parser = subparsers.add_parser(
         "info",
         help="describe a drive folder",
-        description="Validate a drive folder and describe it.",
+        description=(
+            "Validate a drive folder (every point tile is read and every image decoded, at 1/8 "
+            "scale) and describe it."
+        ),
     )
     parser.add_argument("drive", type=Path)
     parser.set_defaults(func=run)
@@ -21,9 +24,11 @@ def add_parser(subparsers: common.Subparsers) -> None:
 def run(args: argparse.Namespace) -> int:
     from guardrail_core.formats.drive import open_drive
     from guardrail_core.formats.drive_summary import describe_drive
+    from guardrail_core.formats.image_check import check_images
 
     source = open_drive(args.drive)
-    # Every tile is read: info validates the whole drive.
+    # Every tile is read and every image decoded: info validates the whole drive.
     points, truth = source.read_tiles(range(len(source.tiles)))
+    check_images(source.root, source.images, source.cameras)
     print(describe_drive(source.drive(points, truth), source.tiles))
     return 0

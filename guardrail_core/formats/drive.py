@@ -480,6 +480,8 @@ def _load_images(
             raise DriveFormatError(f"{where}: gps_time is not a number ({exc})") from exc
         if camera not in cameras:
             raise DriveFormatError(f"{where}: camera {camera!r} has no calibration in cameras.json")
+        if Path(file).is_absolute() or ".." in Path(file).parts:
+            raise DriveFormatError(f"{where}: file {file!r} must be a path inside the drive folder")
         if not np.isfinite(gps_time):
             raise NonFiniteCoordinatesError(f"{where}: gps_time is not finite")
         if not span[0] <= gps_time <= span[1]:
