@@ -14,9 +14,12 @@ models (compared route by route, with a drive, a run, labels, a training and a r
 from __future__ import annotations
 
 from collections.abc import Iterable
-from typing import Annotated, Any, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
+
+from app.params_models import NOT_A_SWITCH, stages_model
+from guardrail_core.reconstruct.pipeline import ReconstructionParams
 
 #: An operator's or a model's label of a segment.
 LabelName = Literal["guardrail", "other"]
@@ -51,7 +54,8 @@ def error_response(status: int, description: str) -> dict[int | str, Any]:
 #: holds exactly, so the schema states its bound exactly too; far inside int64 (a larger id is a
 #: 422, not an overflow; one the run does not have is a 404).
 MAX_SEGMENT_ID = 2**53
-SegmentId = Annotated[int, Field(ge=-MAX_SEGMENT_ID, le=MAX_SEGMENT_ID)]
+#: ``true`` is not segment 1.
+SegmentId = Annotated[int, Field(ge=-MAX_SEGMENT_ID, le=MAX_SEGMENT_ID), NOT_A_SWITCH]
 
 JPEG = file_response(["image/jpeg"], "The image (JPEG)")
 NOT_FOUND = error_response(404, "No such object (the detail names it)")
@@ -337,9 +341,18 @@ class ReconstructionRun(ResponseModel):
     notes: list[str] = Field(description="what could not be reconstructed, in words")
 
 
-class Reconstruction(ResponseModel):
-    params: dict[str, dict[str, Any]] = Field(
-        description="the parameters by stage, as in models.json"
+if TYPE_CHECKING:  # built at run time from the stages' declarations
+    ReconstructionStages = BaseModel
+else:
+    ReconstructionStages = stages_model(
+        "ReconstructionStages",
+        ReconstructionParams.stage_classes(),
+        "The reconstruction's parameters by stage, as in models.json; each field's description "
+        "gives its unit and range.",
     )
+
+
+class Reconstruction(ResponseModel):
+    params: ReconstructionStages = Field(description="the parameters by stage, as in models.json")
     runs: list[ReconstructionRun]
     present: bool = Field(description="false: not reconstructed yet (params are the defaults)")

@@ -30,6 +30,10 @@ P = TypeVar("P", bound="StageParams")
 
 _UNIT_SUFFIXES = ("_m", "_deg", "_s", "_px", "_mm", "_hz")
 
+#: The largest integer parameter: 2**53, the largest integer a JSON number (a double) holds
+#: exactly (parameters are saved as JSON), far inside numpy's int64.
+MAX_INTEGER = 2**53
+
 
 class ParameterError(InvalidOptionError):
     """A parameter is of the wrong type, not finite, outside its range, or unknown."""
@@ -156,9 +160,6 @@ class StageParams:
                 raise ParameterError(
                     f"unknown parameter {cls.__name__}.{key} (known: {', '.join(sorted(names))})"
                 )
-            default = names[name].default
-            if isinstance(default, tuple) and isinstance(value, list):
-                value = tuple(value)  # JSON has lists where the parameters have tuples
             values[name] = value
         return cls(**values)
 
@@ -189,8 +190,8 @@ def _checked(owner: str, f: dataclasses.Field, kind: Any, value: Any) -> Any:
             value = int(value)
         if isinstance(value, bool) or not isinstance(value, int):
             raise ParameterError(f"{where} must be an integer, got {value!r}")
-        if not -(2**63) <= value < 2**63:  # what numpy's int64 (and every table) holds
-            raise ParameterError(f"{where} must fit in 64 bits, got {value:.3g}")
+        if not -MAX_INTEGER <= value <= MAX_INTEGER:
+            raise ParameterError(f"{where} must lie within ±2^53, got {value:.3g}")
     elif kind is float:
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise ParameterError(f"{where} must be a number, got {value!r}")
@@ -199,6 +200,8 @@ def _checked(owner: str, f: dataclasses.Field, kind: Any, value: Any) -> Any:
             raise ParameterError(f"{where} must be a finite number, got {value!r}")
     elif kind is str and not isinstance(value, str):
         raise ParameterError(f"{where} must be a string, got {value!r}")
+    elif typing.get_origin(kind) is tuple:
+        return _checked_tuple(where, meta, typing.get_args(kind), value)
     if meta["choices"] is not None:
         if value not in meta["choices"]:
             choices = ", ".join(repr(c) for c in meta["choices"])
@@ -208,6 +211,43 @@ def _checked(owner: str, f: dataclasses.Field, kind: Any, value: Any) -> Any:
         spec = ParamSpec(name=f.name, **{k: meta[k] for k in _SPEC_KEYS})
         raise ParameterError(f"{where} must lie within {spec.range_text()}, got {value!r}")
     return value
+
+
+_ITEM_TYPES: dict[Any, Any] = {int: int, float: int | float}
+
+
+def _checked_tuple(
+    where: str, meta: Mapping[str, Any], kinds: tuple[Any, ...], value: Any
+) -> tuple[Any, ...]:
+    """A tuple of integers or numbers (fixed length, or ``tuple[float, ...]``: one or more),
+    each item within the field's range."""
+    if isinstance(value, list):
+        value = tuple(value)  # JSON has lists where the parameters have tuples
+    if isinstance(value, tuple) and int in kinds:  # 3.0 is the integer 3, as for a scalar
+        value = tuple(int(v) if isinstance(v, float) and v.is_integer() else v for v in value)
+    if len(kinds) == 2 and kinds[1] is Ellipsis:
+        size = "one or more"
+        kinds = (kinds[0],) * (len(value) if isinstance(value, tuple) and value else 1)
+        fits = isinstance(value, tuple) and len(value) >= 1
+    else:
+        size = str(len(kinds))
+        fits = isinstance(value, tuple) and len(value) == len(kinds)
+    words = "integers" if all(k is int for k in kinds) else "numbers"
+    if (
+        not fits
+        or any(
+            isinstance(v, bool) or not isinstance(v, _ITEM_TYPES[k])
+            for v, k in zip(value, kinds, strict=True)
+        )
+        or any(isinstance(v, float) and not math.isfinite(v) for v in value)
+    ):
+        raise ParameterError(f"{where} must be {size} finite {words}, got {value!r}")
+    if not all(_in_range(v, meta) for v in value):
+        spec = ParamSpec(name=where, **{k: meta[k] for k in _SPEC_KEYS})
+        raise ParameterError(
+            f"{where} must be {size} {words} within {spec.range_text()}, got {value!r}"
+        )
+    return tuple(float(v) if k is float else v for v, k in zip(value, kinds, strict=True))
 
 
 def _in_range(value: float, meta: Mapping[str, Any]) -> bool:

@@ -16,6 +16,7 @@ from fastapi.testclient import TestClient
 from app.main import create_app
 from app.routers.reconstruction import MEDIA_TYPES
 from app.session import ReviewSession
+from guardrail_core.reconstruct.pipeline import ReconstructionParams
 
 #: Routes that send a file, and its media types.
 FILE_ROUTES = {
@@ -239,3 +240,28 @@ def test_every_field_is_typed_and_every_answer_closed(spec: dict[str, Any]) -> N
                 open_models.append(name)
     assert untyped == []
     assert open_models == []
+
+
+def test_the_reconstruction_parameters_state_every_range(spec: dict[str, Any]) -> None:
+    """The apply route's body names every stage and parameter with the stage's own bounds, so a
+    client can build a valid request from the schema alone (test_app_fuzz does)."""
+    body = spec["paths"]["/api/reconstruction/apply"]["post"]["requestBody"]["content"]
+    body_schema = body["application/json"]["schema"]
+    checked = 0
+    for stage, cls in ReconstructionParams.stage_classes().items():
+        for param in cls.specs():
+            field = _field(spec, body_schema, f"params.{stage}.{param.name}")
+            assert field is not None, f"{stage}.{param.name}"
+            bounds = field if "prefixItems" not in field else field["prefixItems"][0]
+            for ours, theirs in (
+                (param.ge, "minimum"),
+                (param.gt, "exclusiveMinimum"),
+                (param.le, "maximum"),
+                (param.lt, "exclusiveMaximum"),
+            ):
+                if ours is not None:
+                    assert bounds[theirs] == ours, f"{stage}.{param.name} {theirs}"
+            checked += 1
+    assert checked > 100
+    slice_interval = _field(spec, body_schema, "params.pipes.slice_interval_m")
+    assert slice_interval is not None and slice_interval["minimum"] == 0.005

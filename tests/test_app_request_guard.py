@@ -158,4 +158,18 @@ def test_reconstruction_parameters_out_of_range_are_a_422_and_start_nothing(clie
     ):
         answer = client.post("/api/reconstruction/apply", json={"params": params})
         assert answer.status_code == 422, params
+        stage, name = next((stage, name) for stage, values in params.items() for name in values)
+        assert answer.json()["detail"][0]["loc"] == ["body", "params", stage, name]
+    assert client.get("/api/jobs").json()["items"] == []
+
+
+def test_a_rule_between_parameters_is_a_422_of_the_same_shape(client: TestClient):
+    """JSON Schema cannot say "taubin_mu below -taubin_lambda": the route refuses it itself."""
+    answer = client.post(
+        "/api/reconstruction/apply", json={"params": {"beams": {"taubin_mu": -0.1}}}
+    )
+    assert answer.status_code == 422
+    [error] = answer.json()["detail"]
+    assert error["loc"] == ["body", "params"] and error["type"] == "value_error"
+    assert "taubin_mu must be below -taubin_lambda" in error["msg"]
     assert client.get("/api/jobs").json()["items"] == []

@@ -6,13 +6,23 @@ from pathlib import Path
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, HTTPException
+from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, ConfigDict, Field
 
 from app import review_jobs
 from app.dependencies import get_jobs, get_session
 from app.jobs import JobBusyError, JobRunner
-from app.schemas import CONFLICT, NOT_FOUND, Downloads, JobStarted, Reconstruction, file_response
+from app.params_models import given_values
+from app.schemas import (
+    CONFLICT,
+    NOT_FOUND,
+    Downloads,
+    JobStarted,
+    Reconstruction,
+    ReconstructionStages,
+    file_response,
+)
 from app.session import ReviewSession
 from guardrail_core.errors import InvalidOptionError, NoReconstructionError, RunFolderError
 from guardrail_core.formats.run_folder_paths import RunFolder
@@ -86,7 +96,12 @@ def get_reconstruction(session: Session) -> dict[str, Any]:
 
 
 class ApplyBody(BaseModel):
-    params: dict[str, dict[str, Any]] = Field(default_factory=dict)
+    model_config = ConfigDict(extra="forbid")
+
+    params: ReconstructionStages = Field(
+        default_factory=ReconstructionStages,
+        description="the stages and names to change; the others keep their defaults",
+    )
 
 
 @router.post(
@@ -95,10 +110,12 @@ class ApplyBody(BaseModel):
 def post_apply(session: Session, jobs: Jobs, body: ApplyBody) -> dict[str, Any]:
     """Reconstruct every guardrail again from the current labels with these parameters (by
     stage, as in ``models.json``; missing ones keep their defaults); poll the job."""
+    given = given_values(body.params)
     try:
-        params = ReconstructionParams.from_json(body.params)
-    except InvalidOptionError as exc:
-        raise HTTPException(422, detail=str(exc)) from exc
+        params = ReconstructionParams.from_json(given)
+    except InvalidOptionError as exc:  # a rule between fields, which the schema cannot state
+        error = {"loc": ("body", "params"), "msg": str(exc), "type": "value_error", "input": given}
+        raise RequestValidationError([error]) from exc
     try:
         return {"job": jobs.submit("reconstruct", review_jobs.reconstruct(session, params)).id}
     except JobBusyError as exc:

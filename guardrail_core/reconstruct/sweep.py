@@ -55,22 +55,11 @@ class SweepParams(StageParams):
         "about 145° would otherwise spike).",
     )
     rail_color: tuple[int, int, int, int] = param(
-        (225, 225, 215, 255), doc="RGBA (0-255) vertex colour of pipes and beams."
+        (225, 225, 215, 255), ge=0, le=255, doc="RGBA (0-255) vertex colour of pipes and beams."
     )
     pole_color: tuple[int, int, int, int] = param(
-        (150, 150, 145, 255), doc="RGBA (0-255) vertex colour of poles."
+        (150, 150, 145, 255), ge=0, le=255, doc="RGBA (0-255) vertex colour of poles."
     )
-
-    def check_relations(self) -> None:
-        for name in ("rail_color", "pole_color"):
-            color = getattr(self, name)
-            if not (
-                isinstance(color, tuple)
-                and len(color) == 4
-                and all(isinstance(c, int) and not isinstance(c, bool) for c in color)
-                and all(0 <= c <= 255 for c in color)
-            ):
-                self.fail(f"{name} must be four integers 0-255 (RGBA), got {color!r}")
 
 
 def empty_mesh() -> trimesh.Trimesh:
