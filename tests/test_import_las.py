@@ -692,3 +692,57 @@ def test_a_truncated_laz_is_a_named_error(small: Delivery, tmp_path: Path) -> No
     with pytest.raises(SourceFormatError, match="not a readable LAS/LAZ file"):
         run_import(small, out, points=compressed)
     assert_nothing_left(out)
+
+
+@pytest.mark.parametrize(
+    ("case", "error"),
+    [
+        (
+            "rotations 0",
+            "SourceFormatError: scanner: ScannerParams.rotation_rate_hz must lie within",
+        ),
+        ("measurements nan", "ScannerParams.measurement_rate_hz must be a finite number"),
+        ("out is a file", "OutputKindError"),
+        ("out is a link", "OutputSymlinkError"),
+        ("out is a link loop", "OutputSymlinkError"),
+    ],
+)
+def test_a_bad_option_or_output_is_named_before_any_point_is_read(
+    small: Delivery,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+    case: str,
+    error: str,
+) -> None:
+    """These once failed with a traceback, some after the whole import had run."""
+    import guardrail_core.importers.las_delivery as las_delivery
+
+    def no_reading(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the points were read before the error")
+
+    monkeypatch.setattr(las_delivery, "_stream_points", no_reading)
+    out = tmp_path / "out"
+    rates = ["--rotations-per-second", "100", "--measurements-per-second", "3e5"]
+    if case == "rotations 0":
+        rates[1] = "0"
+    elif case == "measurements nan":
+        rates[3] = "nan"
+    elif case == "out is a file":
+        out.write_text("kept")
+    elif case == "out is a link":
+        (tmp_path / "real").mkdir()
+        out.symlink_to(tmp_path / "real")
+    else:
+        out.symlink_to(tmp_path / "loop")
+        (tmp_path / "loop").symlink_to(out)
+    before = {p.name: p.is_symlink() for p in tmp_path.iterdir()}
+    for overwrite in ([], ["--overwrite"]):
+        capsys.readouterr()
+        argv = [str(small.points), "--trajectory", str(small.trajectory), "--out", str(out)]
+        assert main(["import", "las", *argv, *rates, *overwrite]) == 2
+        err = capsys.readouterr().err
+        assert error in err and "Traceback" not in err
+        assert {p.name: p.is_symlink() for p in tmp_path.iterdir()} == before
+    if case == "out is a file":
+        assert out.read_text() == "kept"
