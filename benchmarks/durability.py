@@ -70,25 +70,17 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def prepare(work: Path) -> tuple[Path, Path]:
-    """Simulate and process the small test drive; return (drive, run)."""
+def prepare(work: Path, log: Path) -> tuple[Path, Path]:
+    """Simulate and process the small test drive; return (drive, run). Their output goes to
+    ``log`` (stdout carries only the figures)."""
     drive, run = work / "drive", work / "run"
-    subprocess.run(
-        [
-            str(GUARDRAIL),
-            "simulate",
-            "--scene",
-            "test_straight",
-            "--seed",
-            "11",
-            "--quiet",
-            str(drive),
-        ],
-        check=True,
-    )
-    subprocess.run(
-        [str(GUARDRAIL), "process", str(drive), "--out", str(run), "--quiet"], check=True
-    )
+    commands = [
+        ["simulate", "--scene", "test_straight", "--seed", "11", "--quiet", str(drive)],
+        ["process", str(drive), "--out", str(run), "--quiet"],
+    ]
+    with log.open("ab") as sink:
+        for command in commands:
+            subprocess.run([str(GUARDRAIL), *command], check=True, stdout=sink, stderr=sink)
     return drive, run
 
 
@@ -183,9 +175,10 @@ def main() -> int:
     parser.add_argument("--json", action="store_true", help="print the figures as JSON")
     args = parser.parse_args()
     work = Path(tempfile.mkdtemp(prefix="durability-"))
+    finished = False
     try:
-        drive, run = (args.drive, args.run) if args.drive else prepare(work)
         review, server_log = work / "review", work / "server.log"
+        drive, run = (args.drive, args.run) if args.drive else prepare(work, server_log)
         rng = random.Random(args.seed)
         expected: dict[int, tuple[str | None, set[str]]] = {}
         lost: list[str] = []
@@ -249,8 +242,12 @@ def main() -> int:
             "requests_per_s_median": round(statistics.median(rates), 1),
             "machine": f"{platform.machine()}, {os.cpu_count()} cores, {platform.system()}",
         }
+        finished = True
     finally:
-        shutil.rmtree(work, ignore_errors=True)
+        if finished:
+            shutil.rmtree(work, ignore_errors=True)
+        else:  # the server's log and the label store tell what went wrong
+            print(f"kept {work} for a look", file=sys.stderr)
     if args.json:
         print(json.dumps(figures, indent=1))
     else:
