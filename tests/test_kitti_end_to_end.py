@@ -15,9 +15,12 @@ import json
 from pathlib import Path
 
 import cv2
+import laspy
 import numpy as np
 import pytest
 
+from guardrail_core.cli import main
+from guardrail_core.export.run_export import load_export_source
 from guardrail_core.extract.crops import CROP_OK, CropParams, crop_window, cut_crop
 from guardrail_core.extract.model_folder import DEFAULT_MODEL_DIR, load_model
 from guardrail_core.formats.drive import Drive, load_drive
@@ -25,6 +28,7 @@ from guardrail_core.formats.run_folder import Run, crop_name, load_run
 from guardrail_core.importers.kitti import import_kitti
 from guardrail_core.process import process_drive
 from tests.kitti_data import KITTI_RAW, KITTI_SEQ01, require_kitti
+from tests.test_export_opendrive import Reader, _check_objects
 
 ROAD_Z_M = -1.72
 WINDOW_M = 40.0
@@ -125,6 +129,29 @@ def test_motorway_w_beam_reconstructed_with_section_and_posts(motorway) -> None:
     t = np.clip(((points[:, None] - a) * ab).sum(-1) / (ab * ab).sum(-1), 0.0, 1.0)
     distance = np.linalg.norm(points[:, None] - (a + t[..., None] * ab), axis=-1).min(axis=1)
     assert np.median(distance) < 0.02
+
+
+def test_motorway_exports_las_and_opendrive_and_refuses_the_map_formats(
+    motorway, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A KITTI odometry frame has no georeference (its CRS is the velodyne frame): LAS and
+    OpenDRIVE are written in that frame, and the formats that place it on the Earth refuse it
+    by name with nothing written."""
+    _, _, run_dir = motorway
+    xodr, laz = tmp_path / "road.xodr", tmp_path / "points.laz"
+    assert main(["export", str(run_dir), "--opendrive", str(xodr), "--las", str(laz)]) == 0
+    reader = Reader(xodr)
+    assert reader.root.find("header/geoReference") is None
+    source = load_export_source(run_dir)
+    _check_objects(reader, source)
+    assert len(reader.objects("barrier")) >= 1  # the W-beam at least
+    assert laspy.read(str(laz)).header.point_count > 0
+    for option, name in (("--cityjson", "x.city.json"), ("--osm", "x.osm"), ("--3dtiles", "t")):
+        capsys.readouterr()
+        assert main(["export", str(run_dir), option, str(tmp_path / name)]) == 2
+        err = capsys.readouterr().err
+        assert "ExportError" in err and "Traceback" not in err, err
+        assert not (tmp_path / name).exists()
 
 
 @pytest.fixture(scope="module")

@@ -63,6 +63,12 @@ class ExportSource:
         as :func:`guardrail_core.reconstruct.assemble.run_parts` builds them."""
         return run_parts(run, self.sweep)
 
+    @property
+    def georeferenced(self) -> bool:
+        """Whether the CRS places the drive on the Earth: not a ``local: ...`` frame, as a KITTI
+        odometry frame's velodyne frame is (``guardrail import kitti``)."""
+        return not self.crs.lower().startswith("local")
+
     def to_map(self, local: np.ndarray) -> np.ndarray:
         """(..., 3) float64 map coordinates of (..., 3) local ones."""
         return np.asarray(local, np.float64) + self.origin
