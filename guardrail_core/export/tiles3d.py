@@ -215,7 +215,8 @@ def export_run_3dtiles(
     Returns
     -------
     A :class:`TilesSummary`. The folder appears whole or not at all
-    (:func:`guardrail_core.formats.atomic.staged_folder`).
+    (:func:`guardrail_core.formats.atomic.staged_folder`); the output is checked once the run's
+    reconstruction and drive are read, before any work.
 
     Raises
     ------
@@ -226,8 +227,6 @@ def export_run_3dtiles(
         folder's files, ``reconstruction/``, the drive's parts), even with ``overwrite``.
     OutputKindError, OutputSymlinkError
         ``out_dir`` is a file, or a symbolic link.
-
-    The output is checked once the run's reconstruction and drive are read, before any work.
     ExportError
         The drive names no CRS, PROJ cannot convert it to ECEF, or no run has geometry.
     RunFolderError, DriveError
