@@ -57,7 +57,7 @@ def add_parser(subparsers: common.Subparsers) -> None:
         "(LAS 1.4, the drive's CRS) with class 64 guardrail, 65 guardrail pole, 11 road surface, "
         "and the extra dimensions segment_id, guardrail_probability and run_id. The others write "
         "the reconstructed runs (meshes, poles and the inventory's attributes) in the drive's "
-        "CRS (OpenStreetMap: WGS84). See docs/export.md.",
+        "CRS (3D Tiles: ECEF; OpenStreetMap: WGS84). See docs/export.md.",
         parents=[own, common.overwrite_options()],
     )
     parser.set_defaults(func=run)
