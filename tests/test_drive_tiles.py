@@ -3,9 +3,11 @@ window at a time; format 1.x drives read as one tile; a bad index refused by nam
 
 from __future__ import annotations
 
+import gc
 import json
 import re
 import shutil
+import tracemalloc
 from pathlib import Path
 from typing import Any
 
@@ -22,6 +24,7 @@ from guardrail_core.errors import (
     TimestampMismatchError,
 )
 from guardrail_core.formats.drive import Drive, PointCloud, Truth, load_drive, open_drive
+from guardrail_core.formats.drive_summary import count_points
 from guardrail_core.formats.drive_tiles import (
     TiledPointWriter,
     read_tile_index,
@@ -383,3 +386,31 @@ def test_info_decodes_every_image(copy: Path, capsys: pytest.CaptureFixture[str]
     assert f"2 of {len(images)} images are bad" in err
     assert f"{images[1]['file']}: not a readable image" in err
     assert f"{images[2]['file']}: about" in err and "is calibrated for" in err
+
+
+def test_info_holds_one_tile_at_a_time(tiled: Path) -> None:
+    """``guardrail info`` once read the whole drive at once: 6.4 GB for 3 km."""
+    source = open_drive(tiled)
+    n = len(source.tiles)
+    assert n >= 5
+
+    def peak(work) -> int:
+        gc.collect()
+        tracemalloc.start()
+        try:
+            work()
+            return tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+
+    whole = peak(lambda: source.read_tiles(range(n)))
+    one = max(peak(lambda i=i: source.read_tiles([i])) for i in range(n))
+    counted = peak(lambda: count_points(source))
+    assert counted < 1.5 * one and counted < whole / 2, (counted, one, whole)
+    counts = count_points(source)
+    points, truth = source.read_tiles(range(n))
+    assert counts.points == len(points)
+    assert truth is not None and counts.by_class is not None
+    np.testing.assert_array_equal(
+        counts.by_class, np.bincount(truth.point_class, minlength=len(counts.by_class))
+    )

@@ -27,7 +27,7 @@ def add_parser(subparsers: common.Subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from guardrail_core.formats.drive import load_drive
+    from guardrail_core.formats.drive import load_drive, open_drive
     from guardrail_core.formats.drive_summary import describe_drive
     from guardrail_core.synth.scene import load_scene_spec
     from guardrail_core.synth.simulate import simulate_drive
@@ -40,7 +40,7 @@ def run(args: argparse.Namespace) -> int:
             load_scene_spec(DEMO_SCENE), out, seed=7, overwrite=True, progress=not args.quiet
         )
         print(f"simulated the sample drive into {out}")
-    print(describe_drive(load_drive(out)))
+    print(describe_drive(open_drive(out)))
 
     from guardrail_core.cli.train import held_out_report
     from guardrail_core.evaluate.detection import evaluate_run, format_report

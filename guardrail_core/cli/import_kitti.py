@@ -40,7 +40,7 @@ def add_parser(subparsers: common.Subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from guardrail_core.formats.drive import load_drive
+    from guardrail_core.formats.drive import open_drive
     from guardrail_core.formats.drive_summary import describe_drive
     from guardrail_core.importers.kitti import import_kitti, parse_frames
 
@@ -57,5 +57,5 @@ def run(args: argparse.Namespace) -> int:
         f"imported {len(result.frames)} frames ({result.n_points:,} points, {result.rings} rings, "
         f"{result.n_images} images) into {result.out}"
     )
-    print(describe_drive(load_drive(result.out)))
+    print(describe_drive(open_drive(result.out)))
     return 0

@@ -23,12 +23,12 @@ def add_parser(subparsers: common.Subparsers) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from guardrail_core.formats.drive import open_drive
-    from guardrail_core.formats.drive_summary import describe_drive
+    from guardrail_core.formats.drive_summary import count_points, describe_drive
     from guardrail_core.formats.image_check import check_images
 
     source = open_drive(args.drive)
-    # Every tile is read and every image decoded: info validates the whole drive.
-    points, truth = source.read_tiles(range(len(source.tiles)))
+    # Every tile is read (one at a time) and every image decoded: info validates the whole drive.
+    counts = count_points(source)
     check_images(source.root, source.images, source.cameras)
-    print(describe_drive(source.drive(points, truth), source.tiles))
+    print(describe_drive(source, counts))
     return 0
