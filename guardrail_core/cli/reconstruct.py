@@ -26,32 +26,31 @@ def add_parser(subparsers: common.Subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from guardrail_core.formats.drive import drive_parts, load_drive
-    from guardrail_core.formats.run_folder import load_run
+    from guardrail_core.formats.drive import drive_parts, open_drive
+    from guardrail_core.formats.run_folder_paths import RunFolder
+    from guardrail_core.reconstruct.drive_input import gather_reconstruction_points
     from guardrail_core.reconstruct.pipeline import reconstruct_into
 
     params = common.reconstruction_params(args)
-    run_folder = load_run(args.run_dir)
-    drive = load_drive(args.drive or run_folder.info.drive.path, with_truth=False)
-    if len(drive.points) != len(run_folder.point_segment):
-        from guardrail_core.errors import RunFolderError
-
-        raise RunFolderError(
-            f"{args.run_dir}: made from a drive of {len(run_folder.point_segment)} points, but "
-            f"{drive.root} has {len(drive.points)}; give the right drive with --drive"
-        )
+    run_folder = RunFolder(Path(args.run_dir))
+    source = open_drive(args.drive or run_folder.info().drive.path, with_truth=False)
+    label = run_folder.segments()["label"]
+    # Only the guardrail points and the road near them, a tile at a time: a survey never whole.
+    xyz, point_segment = gather_reconstruction_points(
+        source, run_folder, label, params.runs.ground_reach_m
+    )
     summary = reconstruct_into(
         Path(args.run_dir),
-        drive.points.xyz,
-        run_folder.point_segment,
-        run_folder.segments["label"],
-        drive.trajectory.position,
-        origin=drive.origin,
-        crs=drive.crs,
+        xyz,
+        point_segment,
+        label,
+        source.trajectory.position,
+        origin=source.origin,
+        crs=source.crs,
         params=params,
-        inputs=drive_parts(drive.root),
+        inputs=drive_parts(source.root),
         progress=not args.quiet,
     )
     print(common.reconstruction_summary(summary))
-    print(f"wrote {run_folder.folder.reconstruction.root}")
+    print(f"wrote {run_folder.reconstruction.root}")
     return 0
