@@ -64,69 +64,35 @@ def add_parser(subparsers: common.Subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import importlib
+
     from guardrail_core.errors import InvalidOptionError
 
-    wanted = [
-        name for name in ("las", "cityjson", "opendrive", "tiles3d", "osm") if getattr(args, name)
-    ]
+    wanted = [name for name in _EXPORTS if getattr(args, name)]
     if not wanted:
         raise InvalidOptionError(
             "nothing to write: give at least one of --las, --cityjson, --opendrive, --3dtiles, "
             "--osm"
         )
     for name in wanted:
-        for line in _EXPORTS[name](args):
-            print(line)
+        module, export, describe = _EXPORTS[name]
+        library = importlib.import_module(f"guardrail_core.export.{module}")
+        summary = getattr(library, export)(
+            args.run_dir, getattr(args, name), drive_dir=args.drive, overwrite=args.overwrite
+        )
+        for line in getattr(summary, "warnings", ()):
+            print(f"warning: {line}", file=sys.stderr)
+        print(getattr(library, describe)(summary))
     return 0
 
 
-def _las(args: argparse.Namespace) -> list[str]:
-    from guardrail_core.export.las import export_run_las, format_summary
-
-    summary = export_run_las(args.run_dir, args.las, drive_dir=args.drive, overwrite=args.overwrite)
-    for line in summary.warnings:
-        print(f"warning: {line}", file=sys.stderr)
-    return [format_summary(summary)]
-
-
-def _cityjson(args: argparse.Namespace) -> list[str]:
-    from guardrail_core.export.cityjson import export_run_cityjson, format_cityjson_summary
-
-    summary = export_run_cityjson(
-        args.run_dir, args.cityjson, drive_dir=args.drive, overwrite=args.overwrite
-    )
-    return [format_cityjson_summary(summary)]
-
-
-def _opendrive(args: argparse.Namespace) -> list[str]:
-    from guardrail_core.export.opendrive import export_run_opendrive, format_opendrive_summary
-
-    summary = export_run_opendrive(
-        args.run_dir, args.opendrive, drive_dir=args.drive, overwrite=args.overwrite
-    )
-    return [format_opendrive_summary(summary)]
-
-
-def _tiles3d(args: argparse.Namespace) -> list[str]:
-    from guardrail_core.export.tiles3d import export_run_3dtiles, format_tiles_summary
-
-    summary = export_run_3dtiles(
-        args.run_dir, args.tiles3d, drive_dir=args.drive, overwrite=args.overwrite
-    )
-    return [format_tiles_summary(summary)]
-
-
-def _osm(args: argparse.Namespace) -> list[str]:
-    from guardrail_core.export.osm import export_run_osm, format_osm_summary
-
-    summary = export_run_osm(args.run_dir, args.osm, drive_dir=args.drive, overwrite=args.overwrite)
-    return [format_osm_summary(summary)]
-
-
+#: Option (its ``args`` name) -> (module of guardrail_core.export, its export function, its
+#: summary formatter); every export takes (run_dir, out, drive_dir=, overwrite=). The modules
+#: load only when their format is asked for.
 _EXPORTS = {
-    "las": _las,
-    "cityjson": _cityjson,
-    "opendrive": _opendrive,
-    "tiles3d": _tiles3d,
-    "osm": _osm,
+    "las": ("las", "export_run_las", "format_summary"),
+    "cityjson": ("cityjson", "export_run_cityjson", "format_cityjson_summary"),
+    "opendrive": ("opendrive", "export_run_opendrive", "format_opendrive_summary"),
+    "tiles3d": ("tiles3d", "export_run_3dtiles", "format_tiles_summary"),
+    "osm": ("osm", "export_run_osm", "format_osm_summary"),
 }
