@@ -26,6 +26,9 @@ from tqdm import tqdm
 
 from guardrail_core.errors import InvalidOptionError
 
+#: The Dask setting behind the environment variable its nanny sets in every worker it spawns.
+_TRIM_ENV = "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_"
+
 T = TypeVar("T")
 R = TypeVar("R")
 
@@ -80,6 +83,7 @@ def dask_client(spec: ClusterSpec) -> Iterator[Any]:
     if not spec.scheduler and spec.workers == 0:
         yield None
         return
+    import dask
     from dask.distributed import Client, LocalCluster
 
     if spec.scheduler:
@@ -94,14 +98,19 @@ def dask_client(spec: ClusterSpec) -> Iterator[Any]:
         finally:
             client.close()
         return
-    cluster = LocalCluster(
-        n_workers=spec.workers,
-        threads_per_worker=1,
-        processes=True,
-        memory_limit=spec.memory_limit,
-        dashboard_address=":0",  # a free port: never a clash with another cluster
-        silence_logs=logging.ERROR,
-    )
+    # Dask's nanny sets MALLOC_TRIM_THRESHOLD_=64 KiB in its workers by default, which also
+    # switches off glibc's adaptive mmap threshold: every array over 128 KiB is then mapped and
+    # faulted in afresh, and a tile took about 30 % longer (benchmarks/bench_scale.py).
+    # glibc's own defaults keep the freed arrays of one stage for the next.
+    with dask.config.set({_TRIM_ENV: None}):
+        cluster = LocalCluster(
+            n_workers=spec.workers,
+            threads_per_worker=1,
+            processes=True,
+            memory_limit=spec.memory_limit,
+            dashboard_address=":0",  # a free port: never a clash with another cluster
+            silence_logs=logging.ERROR,
+        )
     client = Client(cluster)
     try:
         yield client
