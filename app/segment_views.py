@@ -9,18 +9,13 @@ import numpy as np
 
 from app.session import ReviewSession
 from guardrail_core.formats.run_folder import CROP_OK, CROP_STATUS_NAMES
+from guardrail_core.review.queue import queue_order, queue_scores, uncertainty
 
 SORTS = ("id", "uncertainty", "probability", "-probability")
 
 
 def _name(flag: bool) -> str:
     return "guardrail" if flag else "other"
-
-
-def uncertainty(probability: np.ndarray) -> np.ndarray:
-    """(S,) 1 at p = 0.5, 0 at p = 0 or 1; segments without a probability count as 1."""
-    p = np.asarray(probability, np.float64)
-    return np.where(np.isnan(p), 1.0, 1.0 - np.abs(2.0 * p - 1.0))
 
 
 def segment_rows(session: ReviewSession, ids: np.ndarray) -> list[dict[str, Any]]:
@@ -94,9 +89,9 @@ def review_queue(session: ReviewSession, limit: int) -> list[dict[str, Any]]:
     """
     seg = session.run.segments
     disagrees = seg["raw_label"] != seg["label"]
-    score = uncertainty(seg["probability"]) + disagrees.astype(np.float64)
-    candidates = np.flatnonzero(session.operator_label < 0)
-    order = candidates[np.argsort(-score[candidates], kind="stable")][:limit]
+    score = queue_scores(seg["probability"], seg["raw_label"], seg["label"])
+    reviewed = session.operator_label >= 0
+    order = queue_order(seg["probability"], seg["raw_label"], seg["label"], reviewed)[:limit]
     rows = segment_rows(session, order)
     for row, s in zip(rows, order, strict=True):
         row["reason"] = "disagrees" if disagrees[s] else "uncertain"

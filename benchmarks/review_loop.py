@@ -1,0 +1,158 @@
+"""The review loop's learning curve: how many operator labels a model needs on a street whose
+design it never saw.
+
+Usage::
+
+    .venv/bin/python benchmarks/review_loop.py DRIVE [--model MODEL] [--run RUN]
+        [--labels 0,25,50,100,200] [--order queue|random|both] [--seed 0] [--json]
+
+DRIVE is processed with MODEL (default: the shipped default model) into a run (``--run``: an
+existing run of DRIVE instead). Then, for each order, on a copy of that run, an oracle operator
+labels segments with the truth (the class of most of a segment's points) in batches, up to each
+count of ``--labels``:
+
+- ``queue``: the review queue's order (:mod:`guardrail_core.review.queue`: disagreement with the
+  label correction first, then uncertainty), ranked again after every batch from the new
+  predictions, as the app's queue is;
+- ``random``: a random order (``--seed``).
+
+After each batch it fine-tunes exactly as the app's "Train" and "Activate" do
+(:func:`~guardrail_core.review.training.train_from_run` in fast mode on the reviewed labels and
+the run's corrected labels elsewhere, then :func:`~guardrail_core.review.training.predict_run`
+and :func:`~guardrail_core.review.training.write_predictions`), and measures guardrail F (after
+label correction) on the rest of the street: every segment the oracle has not labelled yet.
+
+Prints ``{"labels": [...], "guardrail_f1": [...]}`` per order (``--json``), or a table. Goal
+(issue 21): guardrail F >= 0.98 within 100 labels, and the queue reaching it with at most half
+the labels random order needs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from guardrail_core.distributed import ClusterSpec  # noqa: E402
+from guardrail_core.evaluate.detection import detection_metrics  # noqa: E402
+from guardrail_core.extract.classify import ClassifierParams  # noqa: E402
+from guardrail_core.extract.model_folder import DEFAULT_MODEL_DIR  # noqa: E402
+from guardrail_core.extract.segment_truth import segment_truth  # noqa: E402
+from guardrail_core.formats.drive import open_drive  # noqa: E402
+from guardrail_core.formats.run_folder import load_run  # noqa: E402
+from guardrail_core.process import process_drive_folder  # noqa: E402
+from guardrail_core.review.queue import queue_order  # noqa: E402
+from guardrail_core.review.training import (  # noqa: E402
+    predict_run,
+    train_from_run,
+    write_predictions,
+)
+
+GOAL_F = 0.98
+GOAL_LABELS = 100
+
+
+def true_segments(drive: Path, run: Path) -> np.ndarray:
+    """(S,) bool: the true class of every segment of ``run`` (guardrail: most points are)."""
+    source = open_drive(drive)
+    if not source.has_truth:
+        raise SystemExit(f"{drive}: no truth/ folder; the oracle needs a simulated drive")
+    points, truth = source.read_tiles(range(len(source.tiles)))
+    assert truth is not None
+    folder = load_run(run)
+    return segment_truth(truth.point_class, folder.point_segment, len(folder))
+
+
+def learning_curve(
+    run_dir: Path, truth: np.ndarray, labels: list[int], order: str, seed: int
+) -> dict:
+    """Label, fine-tune and measure ``run_dir`` (modified in place) at each count of ``labels``."""
+    rng = np.random.default_rng(seed)
+    run = load_run(run_dir)
+    random_order = rng.permutation(len(run))
+    reviewed = np.zeros(len(run), bool)
+    point_labels = np.full(len(run.point_segment), -1, np.int8)
+    curve: dict[str, list] = {"labels": [], "guardrail_f1": [], "seconds": []}
+    for count in labels:
+        clock = time.perf_counter()
+        need = count - int(reviewed.sum())
+        if need > 0:
+            seg = run.segments
+            if order == "queue":
+                ranked = queue_order(seg["probability"], seg["raw_label"], seg["label"], reviewed)
+            else:
+                ranked = random_order[~reviewed[random_order]]
+            batch = ranked[:need]
+            reviewed[batch] = True
+            in_batch = np.isin(run.point_segment, batch)
+            point_labels[in_batch] = truth[run.point_segment[in_batch]]
+            trained = train_from_run(run, point_labels, params=ClassifierParams(mode="fast"))
+            write_predictions(run_dir, predict_run(run, trained.model), trained.model)
+            run = load_run(run_dir)
+        rest = ~reviewed
+        f1 = detection_metrics(truth[rest], run.segments["label"][rest]).guardrail.f1
+        curve["labels"].append(int(reviewed.sum()))
+        curve["guardrail_f1"].append(round(float(f1), 4))
+        curve["seconds"].append(round(time.perf_counter() - clock, 1))
+    reached = [
+        n for n, f in zip(curve["labels"], curve["guardrail_f1"], strict=True) if f >= GOAL_F
+    ]
+    curve["labels_to_goal"] = reached[0] if reached else None
+    return curve
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("drive", type=Path, help="a simulated drive (with truth)")
+    parser.add_argument("--model", type=Path, default=DEFAULT_MODEL_DIR)
+    parser.add_argument("--run", type=Path, help="an existing run of DRIVE (else processed here)")
+    parser.add_argument("--labels", default="0,25,50,100,200")
+    parser.add_argument("--order", choices=("queue", "random", "both"), default="both")
+    parser.add_argument("--seed", type=int, default=0, help="the random order's seed")
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args()
+    labels = sorted({int(x) for x in args.labels.split(",")})
+    if labels[0] < 0:
+        raise SystemExit("--labels: counts of 0 or more")
+    orders = ["queue", "random"] if args.order == "both" else [args.order]
+    out: dict = {"drive": str(args.drive), "model": str(args.model)}
+    with tempfile.TemporaryDirectory(prefix="review-loop-") as tmp:
+        run = args.run
+        if run is None:
+            run = Path(tmp) / "run"
+            print(f"processing {args.drive} ...", file=sys.stderr, flush=True)
+            process_drive_folder(
+                args.drive, args.model, run, cluster=ClusterSpec(workers=args.workers)
+            )
+        truth = true_segments(args.drive, run)
+        out["segments"] = len(truth)
+        out["guardrail_segments"] = int(truth.sum())
+        for order in orders:
+            copy = Path(tmp) / f"run_{order}"
+            shutil.copytree(run, copy)
+            print(f"labelling in {order} order ...", file=sys.stderr, flush=True)
+            out[order] = learning_curve(copy, truth, labels, order, args.seed)
+    if args.json:
+        print(json.dumps(out, indent=1))
+    else:
+        print(f"{args.drive}: {out['segments']} segments ({out['guardrail_segments']} guardrail)")
+        print(f"{'labels':>8s}" + "".join(f"{o + ' F':>14s}" for o in orders))
+        for i, n in enumerate(labels):
+            print(f"{n:>8d}" + "".join(f"{out[o]['guardrail_f1'][i]:>14.4f}" for o in orders))
+        for o in orders:
+            print(f"{o}: F >= {GOAL_F} after {out[o]['labels_to_goal']} labels")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
