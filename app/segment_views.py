@@ -91,7 +91,7 @@ def review_queue(session: ReviewSession, limit: int) -> list[dict[str, Any]]:
     disagrees = seg["raw_label"] != seg["label"]
     score = queue_scores(seg["probability"], seg["raw_label"], seg["label"])
     reviewed = session.operator_label >= 0
-    order = queue_order(seg["probability"], seg["raw_label"], seg["label"], reviewed)[:limit]
+    order = queue_order(score, reviewed)[:limit]
     rows = segment_rows(session, order)
     for row, s in zip(rows, order, strict=True):
         row["reason"] = "disagrees" if disagrees[s] else "uncertain"

@@ -50,7 +50,7 @@ from guardrail_core.extract.segment_truth import segment_truth  # noqa: E402
 from guardrail_core.formats.drive import open_drive  # noqa: E402
 from guardrail_core.formats.run_folder import load_run  # noqa: E402
 from guardrail_core.process import process_drive_folder  # noqa: E402
-from guardrail_core.review.queue import queue_order  # noqa: E402
+from guardrail_core.review.queue import queue_order, queue_scores  # noqa: E402
 from guardrail_core.review.training import (  # noqa: E402
     predict_run,
     train_from_run,
@@ -88,7 +88,8 @@ def learning_curve(
         if need > 0:
             seg = run.segments
             if order == "queue":
-                ranked = queue_order(seg["probability"], seg["raw_label"], seg["label"], reviewed)
+                score = queue_scores(seg["probability"], seg["raw_label"], seg["label"])
+                ranked = queue_order(score, reviewed)
             else:
                 ranked = random_order[~reviewed[random_order]]
             batch = ranked[:need]

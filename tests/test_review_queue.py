@@ -22,8 +22,7 @@ def test_the_queue_ranks_disagreement_then_uncertainty_and_skips_reviewed() -> N
     reviewed = np.zeros(7, bool)
     reviewed[5] = True  # as uncertain as segment 1, but an operator has seen it
 
-    np.testing.assert_allclose(
-        queue_scores(probability, raw_label, label), [0.2, 1, 1.2, 0.8, 0.9, 1, 0.04]
-    )
-    assert queue_order(probability, raw_label, label, reviewed).tolist() == [2, 1, 4, 3, 0, 6]
-    assert queue_order(probability, raw_label, label, np.ones(7, bool)).tolist() == []
+    score = queue_scores(probability, raw_label, label)
+    np.testing.assert_allclose(score, [0.2, 1, 1.2, 0.8, 0.9, 1, 0.04])
+    assert queue_order(score, reviewed).tolist() == [2, 1, 4, 3, 0, 6]
+    assert queue_order(score, np.ones(7, bool)).tolist() == []

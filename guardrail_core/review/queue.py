@@ -23,11 +23,8 @@ def queue_scores(probability: np.ndarray, raw_label: np.ndarray, label: np.ndarr
     return uncertainty(probability) + disagrees.astype(np.float64)
 
 
-def queue_order(
-    probability: np.ndarray, raw_label: np.ndarray, label: np.ndarray, reviewed: np.ndarray
-) -> np.ndarray:
-    """(K,) int64 ids of the unreviewed segments (``reviewed`` (S,) bool False), best first;
-    ties keep the segments' order along the drive."""
-    score = queue_scores(probability, raw_label, label)
+def queue_order(score: np.ndarray, reviewed: np.ndarray) -> np.ndarray:
+    """(K,) int64 ids of the unreviewed segments (``reviewed`` (S,) bool False), highest
+    :func:`queue_scores` ``score`` (S,) first; ties keep the segments' order along the drive."""
     candidates = np.flatnonzero(~np.asarray(reviewed, bool))
-    return candidates[np.argsort(-score[candidates], kind="stable")].astype(np.int64)
+    return candidates[np.argsort(-np.asarray(score)[candidates], kind="stable")].astype(np.int64)
