@@ -10,6 +10,7 @@ from guardrail_core.extract.correct import (
     CorrectionParams,
     SegmentExtents,
     correct_labels,
+    correction_reach_slices,
     neighbour_pairs,
 )
 
@@ -294,3 +295,35 @@ def test_correction_does_not_depend_on_segment_order(seed: int) -> None:
 def test_labels_and_extents_of_different_lengths_is_a_named_error() -> None:
     with pytest.raises(GuardrailError):
         correct_labels(np.ones(5, bool), extents(*run(range(3))))
+
+
+@pytest.mark.parametrize("min_run_slices", [1, 2, 3, 4])
+@pytest.mark.parametrize("max_hole_slices", [1, 2])
+def test_raw_labels_beyond_the_reach_do_not_change_a_corrected_label(
+    min_run_slices: int, max_hole_slices: int
+) -> None:
+    """What lets a processing tile ask the CNN only near the slices it owns."""
+    params = CorrectionParams(min_run_slices=min_run_slices, max_hole_slices=max_hole_slices)
+    reach = correction_reach_slices(params)
+    rng = np.random.default_rng(60 + min_run_slices + 10 * max_hole_slices)
+    n = 700
+    slices = rng.integers(0, 100, n)
+    # Rails, posts and curbs in a narrow band: most segments touch, runs are long.
+    lateral = rng.choice([1.7, 2.0, 2.05], n) + rng.uniform(0.0, 0.05, n)
+    height = rng.choice([0.0, 0.3, 0.6], n) + rng.uniform(0.0, 0.1, n)
+    ext = SegmentExtents(
+        slices,
+        np.column_stack([lateral, lateral + rng.uniform(0.05, 0.2, n)]),
+        np.column_stack([height, height + rng.uniform(0.1, 0.7, n)]),
+    )
+    core = (slices >= 40) & (slices < 60)
+    near = (slices >= 40 - reach) & (slices < 60 + reach)
+    corrections = 0
+    for _ in range(20):
+        labels = rng.random(n) < 0.7
+        corrected = correct_labels(labels, ext, params)
+        beyond = labels.copy()
+        beyond[~near] = rng.random(int((~near).sum())) < 0.7
+        np.testing.assert_array_equal(correct_labels(beyond, ext, params)[core], corrected[core])
+        corrections += int((corrected[core] != labels[core]).sum())
+    assert corrections > 20  # the fixture exercises the rules

@@ -97,6 +97,20 @@ class SegmentExtents:
     height: np.ndarray
 
 
+def correction_reach_slices(params: CorrectionParams = CorrectionParams()) -> int:
+    """How many slices away a raw label can change a corrected label, at most.
+
+    A segment's corrected label depends only on the raw labels of segments within this many
+    slices of its own (so a processing tile asks the CNN only for crops that close to the
+    slices it owns). Counted step by step through :func:`correct_labels`, ``m`` being
+    ``min_run_slices``: the one-slice fill looks one slice away; whether a run spans ``m``
+    slices is settled within ``m`` slices (a run that leaves them already spans more); the
+    two-slice fill looks a further run test and two slices beyond; the isolation test of the
+    filled labels ``m`` more: ``2 m + 3`` in all.
+    """
+    return 2 * params.min_run_slices + 3
+
+
 def neighbour_pairs(
     extents: SegmentExtents, params: CorrectionParams = CorrectionParams()
 ) -> np.ndarray:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from guardrail_core.errors import DriveDimensionError, DriveFormatError
@@ -118,24 +119,73 @@ def lattice_normals(
     """
     xyz = np.asarray(xyz, np.float64)
     points = np.arange(len(xyz)) if points is None else np.asarray(points, np.int64)
-    own = xyz[points]
-    max_sq = max_neighbour_distance_m**2
-
-    def near(d_rotation: int, d_phase: int) -> np.ndarray:
-        index = lattice.neighbour(d_rotation, d_phase, points)
-        p = own.copy()
-        found = np.flatnonzero(index >= 0)
-        p[found] = xyz[index[found]]
-        delta = p - own
-        too_far = np.einsum("ij,ij->i", delta, delta) > max_sq
-        p[too_far] = own[too_far]
-        return p
-
-    along = near(0, phase_step) - near(0, -phase_step)
-    across = near(1, 0) - near(-1, 0)
-    normals = np.cross(along, across)
-    length = np.linalg.norm(normals, axis=1)
-    valid = length > 1e-9
-    normals[valid] /= length[valid, None]
-    normals[~valid] = 0.0
+    normals = np.zeros((len(points), 3))
+    valid = np.zeros(len(points), bool)
+    cell = lattice.cell[points]
+    _normals(
+        xyz,
+        points,
+        cell,
+        lattice.grid.ravel(),
+        lattice.grid.shape[1],
+        int(phase_step),
+        float(max_neighbour_distance_m) ** 2,
+        normals,
+        valid,
+    )
     return normals, valid
+
+
+# Compiled: one pass per point instead of some 30 numpy passes over the low points of a tile
+# (most of road removal's time), the same arithmetic in the same order.
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _normals(
+    xyz: np.ndarray,
+    points: np.ndarray,
+    cell: np.ndarray,
+    grid: np.ndarray,
+    phases: int,
+    phase_step: int,
+    max_sq: float,
+    normals: np.ndarray,
+    valid: np.ndarray,
+) -> None:  # pragma: no cover - compiled
+    """Fill ``normals`` (M, 3) and ``valid`` (M,) of :func:`lattice_normals`."""
+    size = len(grid)
+    steps = np.array([[0, phase_step], [0, -phase_step], [1, 0], [-1, 0]])
+    near = np.empty((4, 3))
+    for m in range(len(points)):
+        i = points[m]
+        for k in range(4):
+            near[k, 0] = xyz[i, 0]
+            near[k, 1] = xyz[i, 1]
+            near[k, 2] = xyz[i, 2]
+            if cell[m] < 0:
+                continue
+            target = cell[m] + steps[k, 0] * phases + steps[k, 1]
+            if target < 0 or target >= size or grid[target] < 0:
+                continue
+            j = grid[target]
+            d0 = xyz[j, 0] - xyz[i, 0]
+            d1 = xyz[j, 1] - xyz[i, 1]
+            d2 = xyz[j, 2] - xyz[i, 2]
+            if d0 * d0 + d1 * d1 + d2 * d2 > max_sq:
+                continue  # across a depth jump: the point itself stands in
+            near[k, 0] = xyz[j, 0]
+            near[k, 1] = xyz[j, 1]
+            near[k, 2] = xyz[j, 2]
+        a0 = near[0, 0] - near[1, 0]
+        a1 = near[0, 1] - near[1, 1]
+        a2 = near[0, 2] - near[1, 2]
+        b0 = near[2, 0] - near[3, 0]
+        b1 = near[2, 1] - near[3, 1]
+        b2 = near[2, 2] - near[3, 2]
+        n0 = a1 * b2 - a2 * b1
+        n1 = a2 * b0 - a0 * b2
+        n2 = a0 * b1 - a1 * b0
+        length = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+        if length > 1e-9:
+            valid[m] = True
+            normals[m, 0] = n0 / length
+            normals[m, 1] = n1 / length
+            normals[m, 2] = n2 / length

@@ -12,6 +12,7 @@ from tqdm import tqdm
 from guardrail_core.errors import EmptyDriveError
 from guardrail_core.extract.correct import CorrectionParams, SegmentExtents
 from guardrail_core.extract.crops import (
+    CROP_NO_IMAGE,
     CROP_OK,
     CropChoice,
     CropParams,
@@ -178,9 +179,14 @@ def extract(
     timer: StageTimer | None = None,
     progress: bool = False,
     track: TrackCoordinates | None = None,
+    crop_range_m: tuple[float, float] | None = None,
 ) -> Extraction:
     """Slice a drive (§3.1) and crop every segment's image (§3.2) at ``crop_size`` pixels
-    (``track``: see :func:`slice_drive`)."""
+    (``track``: see :func:`slice_drive`).
+
+    ``crop_range_m``: [first, last) metres along the trajectory; only segments whose slice
+    starts there are cropped, the others get :data:`CROP_NO_IMAGE` (a processing tile's margin
+    beyond what its own labels depend on). None: every segment."""
     timer = timer or StageTimer(len(drive.points))
     point_segment, segments, summary, features = slice_drive(
         drive, params, timer=timer, track=track
@@ -197,6 +203,16 @@ def extract(
                 drive.cameras,
                 params.crops,
                 progress=bar.update,
+            )
+        if crop_range_m is not None:
+            start = segments.slice_index * params.segments.slice_length_m
+            away = (start < crop_range_m[0]) | (start >= crop_range_m[1])
+            choice = CropChoice(
+                np.where(away, -1, choice.image),
+                choice.rect,
+                np.where(away & (choice.status == CROP_OK), CROP_NO_IMAGE, choice.status).astype(
+                    choice.status.dtype
+                ),
             )
         n_ok = int((choice.status == CROP_OK).sum())
         with tqdm(total=n_ok, desc="cutting crops", unit="crop", disable=not progress) as bar:

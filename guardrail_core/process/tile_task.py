@@ -33,7 +33,7 @@ from scipy.spatial import cKDTree
 
 from guardrail_core.errors import GuardrailError
 from guardrail_core.extract.classify import GuardrailClassifier
-from guardrail_core.extract.correct import correct_labels
+from guardrail_core.extract.correct import correct_labels, correction_reach_slices
 from guardrail_core.extract.pipeline import ExtractionParams, extract
 from guardrail_core.extract.segment_scores import score_segments
 from guardrail_core.formats.drive import Drive, DriveSource, open_drive
@@ -49,6 +49,8 @@ from guardrail_core.sensors.track import TrackCoordinates, track_coordinates
 from guardrail_core.timing import StageTimer
 
 PART_FILE = "part.json"
+#: Cells a side of the grid that :func:`_near` looks candidates up in, at most.
+_MAX_CELLS = 2048
 
 
 @dataclass(frozen=True)
@@ -198,7 +200,17 @@ def process_window(
         _write_empty_part(part, index, owned_points, drive_offsets)
         return _outcome(tile, int(owned_points.sum()), start, part, timer, {})
 
-    result = extract(window, model.input_size, params, timer=timer, progress=progress, track=track)
+    # Crops (and the CNN) only where a raw label can change a label this tile owns.
+    reach = correction_reach_slices(params.correction) * params.segments.slice_length_m
+    result = extract(
+        window,
+        model.input_size,
+        params,
+        timer=timer,
+        progress=progress,
+        track=track,
+        crop_range_m=(tile.station_m[0] - reach, tile.station_m[1] + reach),
+    )
     segments, choice = result.segments, result.choice
     with timer.stage("classify", points=len(segments)):
         scores = score_segments(
@@ -311,23 +323,27 @@ def _near(xy: np.ndarray, targets: np.ndarray, candidates: np.ndarray, reach: fl
     """(K,) int64, ascending: the ``candidates`` (N,) bool among the points ``xy`` (N, 2) that lie
     closer than ``reach`` to one of the ``targets`` (N,) bool.
 
-    Only candidates in or beside a ``reach``-sized grid cell holding a target are measured (the
-    road of a tile is mostly far from any guardrail)."""
+    Only candidates in or beside a grid cell holding a target are measured (the road of a tile
+    is mostly far from any guardrail); the cells are looked up in a boolean grid."""
     if not targets.any() or not candidates.any() or not reach > 0:
         return np.zeros(0, np.int64)
     target_xy = xy[targets]
     ids = np.flatnonzero(candidates)
-    corner = target_xy.min(axis=0) - 2 * reach
-    target_cell = np.floor((target_xy - corner) / reach).astype(np.int64)
-    width = int(target_cell[:, 1].max()) + 3
-    occupied = np.unique(target_cell[:, 0] * width + target_cell[:, 1])
-    around = np.unique(
-        (occupied[:, None] + (np.arange(-1, 2)[:, None] * width + np.arange(-1, 2)).ravel()).ravel()
-    )
-    cell = np.floor((xy[ids] - corner) / reach).astype(np.int64)
-    inside = (cell >= 0).all(axis=1) & (cell[:, 1] < width)
-    ids = ids[inside]
-    ids = ids[np.isin(cell[inside, 0] * width + cell[inside, 1], around)]
+    # Cells of at least ``reach``: a point within reach of a target is in its cell or beside it
+    # (and no more than _MAX_CELLS a side, however far the targets spread).
+    extent = float(np.ptp(target_xy, axis=0).max())
+    size = max(reach, extent / _MAX_CELLS)
+    corner = target_xy.min(axis=0) - 2 * size
+    target_cell = np.floor((target_xy - corner) / size).astype(np.int64)
+    shape = target_cell.max(axis=0) + 3
+    around = np.zeros(shape, bool)  # cells holding a target, and their neighbours
+    for dx in (-1, 0, 1):
+        for dy in (-1, 0, 1):
+            around[target_cell[:, 0] + dx, target_cell[:, 1] + dy] = True
+    cell = np.floor((xy[ids] - corner) / size).astype(np.int64)
+    inside = (cell >= 0).all(axis=1) & (cell < shape).all(axis=1)
+    ids, cell = ids[inside], cell[inside]
+    ids = ids[around[cell[:, 0], cell[:, 1]]]
     if len(ids) == 0:
         return ids
     distance, _ = cKDTree(target_xy).query(xy[ids], distance_upper_bound=reach)
