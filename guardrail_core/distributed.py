@@ -138,6 +138,7 @@ def map_tasks(
     points: Callable[[R], int] | None = None,
     failures: tuple[type[BaseException], ...] = (),
     scatter: bool = False,
+    on_result: Callable[[int, R | TaskFailure[T]], None] | None = None,
 ) -> list[R | TaskFailure[T]]:
     """``function`` over ``items`` on the cluster (or here, without a client), in the order of
     ``items``, with a progress bar (tasks done / total, and points/s where ``points`` counts
@@ -146,7 +147,9 @@ def map_tasks(
     A task that raises one of ``failures``, or whose workers kept dying (Dask's
     ``KilledWorker``, after its retries), becomes a :class:`TaskFailure` and the other tasks go
     on; any other exception is a defect and propagates. ``scatter``: the items hold arrays;
-    send them to the workers as data first rather than inside the task graph.
+    send them to the workers as data first rather than inside the task graph. ``on_result(i,
+    result)`` is called here as each task ends, in the order they end (the work that follows a
+    task overlaps the tasks still running).
     """
     results: list[R | TaskFailure[T] | None] = [None] * len(items)
     done_points = 0
@@ -156,6 +159,8 @@ def map_tasks(
         def record(i: int, result: R | TaskFailure[T]) -> None:
             nonlocal done_points
             results[i] = result
+            if on_result is not None:
+                on_result(i, result)
             if points is not None and not isinstance(result, TaskFailure):
                 done_points += points(result)
                 rate = done_points / max(time.perf_counter() - start, 1e-9)

@@ -9,9 +9,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from guardrail_core.extract.lattice import Lattice
@@ -161,7 +160,6 @@ def wireframe_components(
     """
     xyz = np.asarray(xyz, np.float64)
     kept = np.asarray(kept, bool)
-    n = len(xyz)
     max_sq = params.link_distance_m**2
     # Each undirected edge once: forward along the scan line, and nearby pulses of later lines.
     offsets = [(0, d) for d in range(1, params.along_reach + 1)] + [
@@ -169,29 +167,62 @@ def wireframe_components(
         for r in range(1, params.rotation_reach + 1)
         for d in range(-params.phase_reach, params.phase_reach + 1)
     ]
-    heads, tails = [], []
-    source = np.flatnonzero(kept)
-    for d_rotation, d_phase in offsets:
-        other = lattice.neighbour(d_rotation, d_phase, source)
-        ok = other >= 0
-        a, b = source[ok], other[ok]
-        ok = kept[b]
-        a, b = a[ok], b[ok]
-        delta = xyz[a] - xyz[b]
-        close = np.einsum("ij,ij->i", delta, delta) < max_sq
-        heads.append(a[close])
-        tails.append(b[close])
-    # The graph over the kept points alone (a tenth of a tile's): the same components.
-    compact = np.full(n, -1, np.int64)
-    compact[source] = np.arange(len(source))
-    head = compact[np.concatenate(heads)]
-    tail = compact[np.concatenate(tails)]
-    m = len(source)
-    graph = coo_matrix((np.ones(len(head), np.int8), (head, tail)), shape=(m, m)).tocsr()
-    _, kept_labels = connected_components(graph, directed=False)
-    labels = np.zeros(n, np.int64)
-    labels[source] = kept_labels
-    return _renumber(labels, kept)
+    phases = lattice.phases
+    step = np.array([d_rotation * phases + d_phase for d_rotation, d_phase in offsets], np.int64)
+    root = _link(xyz, kept, lattice.cell, lattice.grid.ravel(), step, max_sq)
+    return _renumber(root, kept)
+
+
+# Compiled: a union-find over the wireframe's edges as the lattice gives them, in one pass per
+# point, instead of an edge list per lattice offset and a sparse graph (the same components:
+# :func:`_renumber` numbers them by first point, whatever the roots).
+@numba.njit(cache=True, nogil=True)
+def _link(
+    xyz: np.ndarray,
+    kept: np.ndarray,
+    cell: np.ndarray,
+    grid: np.ndarray,
+    step: np.ndarray,
+    max_sq: float,
+) -> np.ndarray:  # pragma: no cover - compiled
+    """(N,) int64: a root point of every kept point's component (each point its own root where
+    not kept). ``step`` (K,): the flat lattice offsets of the edges each point links forward."""
+    n, size = len(kept), len(grid)
+    parent = np.arange(n)
+    for a in range(n):
+        if not kept[a] or cell[a] < 0:
+            continue
+        for k in range(len(step)):
+            target = cell[a] + step[k]
+            if target < 0 or target >= size:
+                continue
+            b = grid[target]
+            if b < 0 or not kept[b]:
+                continue
+            d0 = xyz[a, 0] - xyz[b, 0]
+            d1 = xyz[a, 1] - xyz[b, 1]
+            d2 = xyz[a, 2] - xyz[b, 2]
+            if d0 * d0 + d1 * d1 + d2 * d2 >= max_sq:
+                continue
+            # Union by pointing the larger root at the smaller, halving paths on the way.
+            ra = a
+            while parent[ra] != ra:
+                parent[ra] = parent[parent[ra]]
+                ra = parent[ra]
+            rb = b
+            while parent[rb] != rb:
+                parent[rb] = parent[parent[rb]]
+                rb = parent[rb]
+            if ra < rb:
+                parent[rb] = ra
+            elif rb < ra:
+                parent[ra] = rb
+    for a in range(n):
+        r = a
+        while parent[r] != r:
+            r = parent[r]
+        parent[a] = r
+    return parent
 
 
 def _renumber(labels: np.ndarray, kept: np.ndarray) -> np.ndarray:

@@ -50,10 +50,27 @@ def _write(path: Path, data: object) -> None:
     path.write_bytes(data)
 
 
+def export_mesh_files(
+    mesh: trimesh.Trimesh, formats: Iterable[str] = MESH_FORMATS
+) -> dict[str, bytes]:
+    """A run's mesh file in each format, as :func:`write_meshes` writes it: {format: bytes}
+    (made where the mesh is made: a worker of ``guardrail process``)."""
+    out: dict[str, bytes] = {}
+    for fmt in formats:
+        data = mesh.export(file_type=fmt)
+        if isinstance(data, str):
+            data = data.encode("utf-8")
+        if not isinstance(data, bytes):
+            raise TypeError(f"an exporter returned {type(data).__name__}, not bytes or text")
+        out[fmt] = data
+    return out
+
+
 def write_meshes(
     folder: Path,
     meshes: Mapping[int, trimesh.Trimesh],
     formats: Iterable[str] = MESH_FORMATS,
+    exported: Mapping[int, Mapping[str, bytes]] | None = None,
 ) -> list[str]:
     """Write each run's mesh in every format, and all runs as one GLB scene.
 
@@ -69,6 +86,8 @@ def write_meshes(
         (:func:`guardrail_core.reconstruct.assemble.run_mesh`). Runs with an empty mesh are
         skipped (no file, no scene node).
     formats : iterable of "glb", "ply", "obj"
+    exported : {run id: {format: bytes}}, files already made by :func:`export_mesh_files`
+        (the others are exported here)
 
     Returns
     -------
@@ -91,7 +110,8 @@ def write_meshes(
         stem = run_file_stem(run_id)
         for fmt in formats:
             name = f"{stem}.{fmt}"
-            _write(folder / name, mesh.export(file_type=fmt))
+            ready = (exported or {}).get(run_id, {}).get(fmt)
+            _write(folder / name, ready if ready is not None else mesh.export(file_type=fmt))
             written.append(name)
         scene.add_geometry(mesh, node_name=stem, geom_name=stem)
     if "glb" in formats:

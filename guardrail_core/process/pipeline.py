@@ -38,13 +38,13 @@ from guardrail_core.formats.drive_tiles import vehicle_station
 from guardrail_core.formats.run_folder import RUN_FORMAT_VERSION, write_run_files
 from guardrail_core.formats.run_folder_paths import RunFolder
 from guardrail_core.formats.run_info import DriveRef, ModelRef, Processing, RunInfo, TileOutcome
-from guardrail_core.process.stitch import stitch_parts
+from guardrail_core.process.stitch import PartStitcher
 from guardrail_core.process.tile_plan import ProcessTile, plan_tiles
 from guardrail_core.process.tile_task import TileJob, process_window, run_tile_job
 from guardrail_core.reconstruct.pipeline import (
     Reconstruction,
     ReconstructionParams,
-    reconstruct_run_input,
+    reconstruct_run_meshes,
     split_runs,
     write_reconstruction,
 )
@@ -203,6 +203,7 @@ def process_drive_folder(
         tiles,
         make_job=job,
         tile_points=[t.points for t in source.tiles.tiles],
+        reads=[[int(d) for d in source.tiles.touching(*t.window_m)] for t in tiles],
         params=params,
         reconstruction=reconstruction,
         overwrite=overwrite,
@@ -243,6 +244,7 @@ def _process(
     run_here: Callable[[ProcessTile, Path], TileOutcome] | None = None,
     make_job: Callable[[ProcessTile, Path], TileJob] | None = None,
     tile_points: list[int],
+    reads: list[list[int]] | None = None,
     params: ExtractionParams,
     reconstruction: ReconstructionParams | None,
     overwrite: bool,
@@ -255,7 +257,8 @@ def _process(
     clock: float | None = None,
 ) -> RunInfo:
     """The tiles (``run_here``: each processed here, one after another; ``make_job``: each a
-    Dask task on ``client`` or on the cluster of ``processing``), then the stitching and the
+    Dask task on ``client`` or on the cluster of ``processing``), stitched as they end
+    (``reads``: the drive tiles each tile's window reads, see :class:`PartStitcher`), then the
     reconstruction."""
     out = Path(out)
     started = time.strftime("%Y-%m-%dT%H:%M:%S%z")
@@ -276,6 +279,12 @@ def _process(
         parts_dir = staging / _PARTS_DIR
         parts_dir.mkdir()
         part_of = {t.number: parts_dir / f"{t.number:06d}" for t in tiles}
+        stitcher = PartStitcher(staging, tile_points, len(tiles), reads)
+
+        def stitch(i: int, result: TileOutcome | TaskFailure) -> None:
+            good = not isinstance(result, TaskFailure) and result.error is None
+            stitcher.add(i, part_of[tiles[i].number] if good else None)
+
         with _client(client, cluster) as dask:
             phase("start")
             results: list[Any]
@@ -289,6 +298,7 @@ def _process(
                     progress=progress and len(tiles) > 1,
                     points=lambda o: o.points,
                     failures=(GuardrailError,),
+                    on_result=stitch,
                 )
             else:
                 assert make_job is not None  # one of the two is given (the callers above)
@@ -300,17 +310,16 @@ def _process(
                     unit="tile",
                     progress=progress,
                     points=lambda o: o.points,
+                    on_result=stitch,
                 )
             phase("tiles")
             outcomes = [_outcome_of(tile, r) for tile, r in zip(tiles, results, strict=True)]
-            ok = [o.error is None for o in outcomes]
-            if not any(ok):
+            if not any(o.error is None for o in outcomes):
                 raise TilesFailedError(
                     f"{drive.root}: every tile failed: "
                     + "; ".join(f"tile {o.number}: {o.error}" for o in outcomes)
                 )
-            done = [part_of[t.number] if good else None for t, good in zip(tiles, ok, strict=True)]
-            stitched = stitch_parts(staging, done, tile_points)
+            stitched = stitcher.finish()
             image_files = [record.file for record in drive.images]
             info = RunInfo(
                 format_version=RUN_FORMAT_VERSION,
@@ -345,15 +354,20 @@ def _process(
                     drive.trajectory.position,
                     reconstruction,
                 )
-                results_runs = map_tasks(
+                # Longest runs first, so that no long run is left alone at the end.
+                order = sorted(range(len(runs)), key=lambda r: -len(runs[r].xyz))
+                done_runs = map_tasks(
                     dask,
-                    partial(reconstruct_run_input, params=reconstruction),
-                    runs,
+                    partial(reconstruct_run_meshes, params=reconstruction),
+                    [runs[r] for r in order],
                     desc="reconstruct",
                     unit="run",
                     progress=progress,
                     scatter=True,
                 )
+                results_runs: list[Any] = [None] * len(runs)
+                for r, result in zip(order, done_runs, strict=True):
+                    results_runs[r] = result
                 models = []
                 for r in results_runs:
                     if isinstance(r, TaskFailure):
@@ -364,7 +378,11 @@ def _process(
                 seconds = round(time.perf_counter() - start, 4)
                 summary = write_reconstruction(
                     RunFolder(staging).reconstruction.root,
-                    Reconstruction([m for m, _ in models], [s for _, s in models]),
+                    Reconstruction(
+                        [m for m, _, _ in models],
+                        [s for _, s, _ in models],
+                        {m.run_id: mesh for m, _, mesh in models if mesh is not None},
+                    ),
                     params=reconstruction,
                     origin=drive.origin,
                     crs=drive.crs,

@@ -1,4 +1,4 @@
-"""Join the parts of the processing tiles into one run folder.
+"""Join the parts of the processing tiles into one run folder, as the tiles end.
 
 Segments get drive-wide numbers (tile by tile, in each tile's order), crops are renamed to
 them, the points' segments are written per drive tile (``points/DDDDDD.npz``), and the
@@ -61,90 +61,139 @@ class Stitched:
     ground_xyz: np.ndarray
 
 
-def stitch_parts(staging: Path, parts: list[Path | None], tile_points: list[int]) -> Stitched:
-    """Join ``parts`` (in tile order; None for a failed tile) into the run folder ``staging``.
+class PartStitcher:
+    """Joins the parts into the run folder as their tiles end, in any order: each part is
+    joined once the parts before it are, and each drive tile's points are written as soon as
+    every part that may own some of them is joined (so the work overlaps the tiles still
+    running, and the pieces of a written drive tile are let go).
 
     Parameters
     ----------
     staging : the run folder being written
-    parts : each processing tile's part folder, None where the tile failed
-    tile_points : points of each of the drive's point tiles; points no part covers (those of a
-        failed tile) get ``POINT_UNPROCESSED``
+    tile_points : points of each of the drive's point tiles
+    n_parts : the processing tiles
+    reads : per processing tile, the drive tiles its window reads (the only ones it can own
+        points of); None: any, so the points are written by :meth:`finish`
     """
-    staging = Path(staging)
-    tables: list[dict[str, np.ndarray]] = []
-    embeddings: list[np.ndarray] = []
-    has_embeddings = True
-    pieces: dict[int, list[tuple[Path, int]]] = defaultdict(list)
-    totals: dict[str, int] = dict.fromkeys(_COUNT_KEYS, 0)
-    crops = {"ok": 0, "no_image": 0, "too_small": 0, "asked": 0}
-    stages: dict[str, dict[str, float]] = {}
-    guardrail: list[tuple[np.ndarray, np.ndarray]] = []
-    ground: list[tuple[np.ndarray, np.ndarray]] = []
-    offset, component_offset = 0, 0
-    (staging / "crops").mkdir(exist_ok=True)
-    for part in parts:
-        if part is None:
-            continue
+
+    def __init__(
+        self,
+        staging: Path,
+        tile_points: list[int],
+        n_parts: int,
+        reads: list[list[int]] | None = None,
+    ) -> None:
+        self.staging = Path(staging)
+        self.tile_points = list(tile_points)
+        self.reads = reads
+        self._arrived: dict[int, Path | None] = {}
+        self._next = 0
+        self._n_parts = n_parts
+        # Parts still to be joined that may own points of each drive tile.
+        self._waiting = [0] * len(tile_points)
+        for tiles in reads or []:
+            for d in tiles:
+                self._waiting[d] += 1
+        self._written = [False] * len(tile_points)
+        self._tables: list[dict[str, np.ndarray]] = []
+        self._embeddings: list[np.ndarray] = []
+        self._has_embeddings = True
+        self._pieces: dict[int, list[tuple[Path, int]]] = defaultdict(list)
+        self._totals: dict[str, int] = dict.fromkeys(_COUNT_KEYS, 0)
+        self._crops = {"ok": 0, "no_image": 0, "too_small": 0, "asked": 0}
+        self._stages: dict[str, dict[str, float]] = {}
+        self._guardrail: list[tuple[np.ndarray, np.ndarray]] = []
+        self._ground: list[tuple[np.ndarray, np.ndarray]] = []
+        self._offset = 0
+        self._component_offset = 0
+        (self.staging / "crops").mkdir(exist_ok=True)
+
+    def add(self, k: int, part: Path | None) -> None:
+        """Part ``k`` has ended (None: it failed); join what can be joined."""
+        self._arrived[k] = part
+        while self._next in self._arrived:
+            joined = self._arrived.pop(self._next)
+            if joined is not None:
+                self._join(joined)
+            if self.reads is not None:
+                for d in self.reads[self._next]:
+                    self._waiting[d] -= 1
+                    if self._waiting[d] == 0:
+                        self._write_points(d)
+            self._next += 1
+
+    def finish(self) -> Stitched:
+        """The joined run, once every part has been added."""
+        if self._next != self._n_parts:
+            raise ValueError(f"stitching: {self._n_parts - self._next} parts have not ended")
+        for d in range(len(self.tile_points)):
+            if not self._written[d]:
+                self._write_points(d)
+        totals, crops = self._totals, self._crops
+        counts = RunCounts(
+            points=sum(self.tile_points),
+            road_points=totals["road_points"],
+            off_road_points=totals["off_road_points"],
+            segment_points=totals["segment_points"],
+            segments=totals["segments"],
+            crops=CropCounts(**crops),
+            guardrail_segments_raw=totals["guardrail_segments_raw"],
+            guardrail_segments=totals["guardrail_segments"],
+            guardrail_points=totals["guardrail_points"],
+        )
+        return Stitched(
+            segments=_concatenate(self._tables),
+            # As for a whole drive: embeddings where a fast model embedded at least one crop.
+            embeddings=np.concatenate(self._embeddings)
+            if self._has_embeddings and crops["ok"]
+            else None,
+            counts=counts,
+            stages=self._stages,
+            guardrail_xyz=_in_drive_order(self._guardrail),
+            ground_xyz=_in_drive_order(self._ground),
+        )
+
+    def _join(self, part: Path) -> None:
         record = json.loads((part / PART_FILE).read_text())
         counts = record["counts"]
         for key in _COUNT_KEYS:
-            totals[key] += int(counts.get(key, 0))
-        for key in crops:
-            crops[key] += int(counts.get("crops", {}).get(key, 0))
+            self._totals[key] += int(counts.get(key, 0))
+        for key in self._crops:
+            self._crops[key] += int(counts.get("crops", {}).get(key, 0))
         for name, entry in record["timings"]["stages"].items():
-            total = stages.setdefault(name, {"seconds": 0.0, "points": 0})
+            total = self._stages.setdefault(name, {"seconds": 0.0, "points": 0})
             total["seconds"] = round(total["seconds"] + float(entry["seconds"]), 4)
             total["points"] += int(entry.get("points", 0))
         with np.load(part / "segments.npz", allow_pickle=False) as data:
             table = {name: data[name] for name in SEGMENT_FIELDS}
         n = len(table["n_points"])
         if n:
-            table["component"] = table["component"] + component_offset
-            component_offset = int(table["component"].max()) + 1
-            tables.append(table)
+            table["component"] = table["component"] + self._component_offset
+            self._component_offset = int(table["component"].max()) + 1
+            self._tables.append(table)
             for crop in sorted((part / "crops").iterdir()):
-                os.replace(crop, staging / crop_name(offset + int(crop.stem)))
+                os.replace(crop, self.staging / crop_name(self._offset + int(crop.stem)))
             if (part / "embeddings.npy").is_file():
-                embeddings.append(np.load(part / "embeddings.npy"))
+                self._embeddings.append(np.load(part / "embeddings.npy"))
             else:
-                has_embeddings = False
+                self._has_embeddings = False
         for piece in sorted((part / "points").glob("*.npz")):
-            pieces[int(piece.stem)].append((piece, offset))
+            self._pieces[int(piece.stem)].append((piece, self._offset))
         with np.load(part / "guardrail.npz", allow_pickle=False) as data:
-            guardrail.append((data["index"], data["xyz"]))
-            ground.append((data["ground_index"], data["ground_xyz"]))
-        offset += n
+            self._guardrail.append((data["index"], data["xyz"]))
+            self._ground.append((data["ground_index"], data["ground_xyz"]))
+        self._offset += n
 
-    for d, n_points in enumerate(tile_points):
-        segment = np.full(n_points, POINT_UNPROCESSED, np.int32)
-        for piece, first in pieces.get(d, []):
+    def _write_points(self, d: int) -> None:
+        """Drive tile ``d``'s point segments from the pieces of the parts (drive-wide segment
+        numbers; ``POINT_UNPROCESSED`` where no part owned a point)."""
+        segment = np.full(self.tile_points[d], POINT_UNPROCESSED, np.int32)
+        for piece, first in self._pieces.pop(d, []):
             with np.load(piece, allow_pickle=False) as data:
                 local = data["segment"]
                 segment[data["index"]] = np.where(local >= 0, local + first, local)
-        write_point_tile(staging, d, segment)
-
-    segments = _concatenate(tables)
-    counts = RunCounts(
-        points=sum(tile_points),
-        road_points=totals["road_points"],
-        off_road_points=totals["off_road_points"],
-        segment_points=totals["segment_points"],
-        segments=totals["segments"],
-        crops=CropCounts(**crops),
-        guardrail_segments_raw=totals["guardrail_segments_raw"],
-        guardrail_segments=totals["guardrail_segments"],
-        guardrail_points=totals["guardrail_points"],
-    )
-    return Stitched(
-        segments=segments,
-        # As for a whole drive: embeddings where a fast model embedded at least one crop.
-        embeddings=np.concatenate(embeddings) if has_embeddings and crops["ok"] else None,
-        counts=counts,
-        stages=stages,
-        guardrail_xyz=_in_drive_order(guardrail),
-        ground_xyz=_in_drive_order(ground),
-    )
+        write_point_tile(self.staging, d, segment)
+        self._written[d] = True
 
 
 def _in_drive_order(pieces: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:

@@ -323,31 +323,42 @@ def _near(xy: np.ndarray, targets: np.ndarray, candidates: np.ndarray, reach: fl
     """(K,) int64, ascending: the ``candidates`` (N,) bool among the points ``xy`` (N, 2) that lie
     closer than ``reach`` to one of the ``targets`` (N,) bool.
 
-    Only candidates in or beside a grid cell holding a target are measured (the road of a tile
-    is mostly far from any guardrail); the cells are looked up in a boolean grid."""
+    Looked up on a grid of cells a third of ``reach`` wide (the road of a tile is mostly far
+    from any guardrail): a candidate in a cell that no point of a cell holding a target can
+    reach is out, one in a cell that every point of such a cell reaches is in, and only the
+    ring between is measured to the nearest target.
+    """
     if not targets.any() or not candidates.any() or not reach > 0:
         return np.zeros(0, np.int64)
     target_xy = xy[targets]
     ids = np.flatnonzero(candidates)
-    # Cells of at least ``reach``: a point within reach of a target is in its cell or beside it
-    # (and no more than _MAX_CELLS a side, however far the targets spread).
+    # No more than _MAX_CELLS cells a side, however far the targets spread.
     extent = float(np.ptp(target_xy, axis=0).max())
-    size = max(reach, extent / _MAX_CELLS)
-    corner = target_xy.min(axis=0) - 2 * size
-    target_cell = np.floor((target_xy - corner) / size).astype(np.int64)
-    shape = target_cell.max(axis=0) + 3
-    around = np.zeros(shape, bool)  # cells holding a target, and their neighbours
-    for dx in (-1, 0, 1):
-        for dy in (-1, 0, 1):
-            around[target_cell[:, 0] + dx, target_cell[:, 1] + dy] = True
+    size = max(reach / 3, extent / _MAX_CELLS)
+    steps = int(np.ceil(reach / size)) + 1
+    corner = target_xy.min(axis=0) - (steps + 1) * size
+    occupied = np.unique(np.floor((target_xy - corner) / size).astype(np.int64), axis=0)
+    shape = occupied.max(axis=0) + steps + 2
+    # Offsets to a target's cell: the nearest and farthest points of the two cells.
+    dx, dy = np.meshgrid(np.arange(-steps, steps + 1), np.arange(-steps, steps + 1))
+    gap = size * np.hypot(np.maximum(np.abs(dx) - 1, 0), np.maximum(np.abs(dy) - 1, 0))
+    span = size * np.hypot(np.abs(dx) + 1, np.abs(dy) + 1)
+    possible = np.zeros(shape, bool)
+    sure = np.zeros(shape, bool)
+    for offsets, grid in ((gap <= reach, possible), (span < reach, sure)):
+        for ox, oy in zip(dx[offsets], dy[offsets], strict=True):
+            grid[occupied[:, 0] + ox, occupied[:, 1] + oy] = True
     cell = np.floor((xy[ids] - corner) / size).astype(np.int64)
     inside = (cell >= 0).all(axis=1) & (cell < shape).all(axis=1)
     ids, cell = ids[inside], cell[inside]
-    ids = ids[around[cell[:, 0], cell[:, 1]]]
-    if len(ids) == 0:
-        return ids
-    distance, _ = cKDTree(target_xy).query(xy[ids], distance_upper_bound=reach)
-    return ids[np.isfinite(distance)]
+    keep = possible[cell[:, 0], cell[:, 1]]
+    ids, cell = ids[keep], cell[keep]
+    in_reach = sure[cell[:, 0], cell[:, 1]]
+    ring = np.flatnonzero(~in_reach)
+    if len(ring):
+        distance, _ = cKDTree(target_xy).query(xy[ids[ring]], distance_upper_bound=reach)
+        in_reach[ring] = np.isfinite(distance)
+    return ids[in_reach]
 
 
 def _outcome(

@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import trimesh
 from scipy.spatial import cKDTree
 from tqdm import tqdm
 
@@ -42,7 +43,7 @@ from guardrail_core.formats.reconstruction_folder import (
 )
 from guardrail_core.formats.run_folder_paths import RunFolder
 from guardrail_core.formats.run_info import ReconstructionSummary
-from guardrail_core.io.meshes import write_meshes
+from guardrail_core.io.meshes import export_mesh_files, write_meshes
 from guardrail_core.params import ParameterError, StageParams
 from guardrail_core.reconstruct.assemble import run_mesh
 from guardrail_core.reconstruct.beams import BeamParams, reconstruct_beam, unit_type
@@ -202,10 +203,14 @@ class Reconstruction:
     ----------
     runs : one model per run of guardrail points, in run id order
     superimposed : per run, the superimposed unit points (None where there were no units)
+    meshes : {run id: (mesh, {format: file bytes})} of runs with poles, where they were made
+        with the models (:func:`reconstruct_run_meshes`); None: :func:`write_reconstruction`
+        makes them
     """
 
     runs: list[RunModel]
     superimposed: list[Superimposition | None]
+    meshes: dict[int, tuple[trimesh.Trimesh, dict[str, bytes]]] | None = None
 
 
 @dataclass(frozen=True)
@@ -449,6 +454,18 @@ def reconstruct_run_input(
     )
 
 
+def reconstruct_run_meshes(
+    run: RunInput, params: ReconstructionParams = ReconstructionParams()
+) -> tuple[RunModel, Superimposition | None, tuple[trimesh.Trimesh, dict[str, bytes]] | None]:
+    """:func:`reconstruct_run_input`, and the run's mesh with its files (None without poles):
+    a task of ``guardrail process``, so that the workers make the meshes too."""
+    model, superimposed = reconstruct_run_input(run, params)
+    if not model.poles:
+        return model, superimposed, None
+    mesh = run_mesh(model, params.sweep)
+    return model, superimposed, (mesh, export_mesh_files(mesh))
+
+
 def reconstruct_guardrails(
     xyz: np.ndarray,
     guardrail: np.ndarray,
@@ -540,8 +557,14 @@ def write_reconstruction(
     rows = inventory_rows(runs, origin)
     write_inventory_geojson(layout.inventory_geojson, rows, runs, origin, crs)
     write_inventory_csv(layout.inventory_csv, rows)
-    meshes = {run.run_id: run_mesh(run, params.sweep) for run in runs if run.poles}
-    mesh_files = write_meshes(layout.meshes_dir, meshes)
+    made = reconstruction.meshes
+    if made is None:
+        meshes = {run.run_id: run_mesh(run, params.sweep) for run in runs if run.poles}
+        mesh_files = write_meshes(layout.meshes_dir, meshes)
+    else:
+        meshes = {run_id: mesh for run_id, (mesh, _) in made.items()}
+        exported = {run_id: files for run_id, (_, files) in made.items()}
+        mesh_files = write_meshes(layout.meshes_dir, meshes, exported=exported)
     status = [row["status"] for row in rows]
     written = [layout.models_file, layout.superimposed_file, layout.inventory_geojson]
     written += [layout.inventory_csv, *(layout.meshes_dir / f for f in mesh_files)]

@@ -7,6 +7,7 @@ two polylines (a crossing, or a pipe meeting another) is shared and does not ste
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass, field
 
@@ -224,18 +225,37 @@ def join_broken_tracks(tracks: list[Track], p: PipeParams) -> list[Track]:
 
 
 def _first_broken_pair(tracks: list[Track], p: PipeParams) -> tuple[int, int] | None:
+    """The first pair (i, j) that :func:`join_broken_tracks` joins, of ``tracks`` sorted by the
+    x of their first centre: in (i, j) order, as a double loop over all pairs would find it,
+    looking at each track only among those that start just after its end (a bisection), with
+    each end's direction worked out once."""
+    firsts = [t.first.x for t in tracks]
+    reach_x = p.link_gap_m + p.slice_interval_m
+    directions: dict[tuple[int, bool], np.ndarray] = {}
+
+    def direction(k: int, end: bool) -> np.ndarray:
+        key = (k, end)
+        if key not in directions:
+            directions[key] = end_direction(tracks[k].xy(), p, end=end)
+        return directions[key]
+
     for i, a in enumerate(tracks):
-        for j, b in enumerate(tracks):
+        # The tests below decide; the bisection (with a nanometre to spare on either side of
+        # the rounding) only skips tracks that cannot pass them.
+        lo = bisect.bisect_left(firsts, a.last.x - 1e-9)
+        hi = bisect.bisect_right(firsts, a.last.x + reach_x + 1e-9)
+        for j in range(lo, hi):
+            b = tracks[j]
             if i == j or b.first.x <= a.last.x:
                 continue
             dx, dy = b.first.x - a.last.x, b.first.y - a.last.y
             gap = math.hypot(dx, dy)
-            if gap > p.join_distance_m or dx > p.link_gap_m + p.slice_interval_m:
+            if gap > p.join_distance_m or dx > reach_x:
                 continue
-            da = end_direction(a.xy(), p, end=True)
-            db = end_direction(b.xy(), p, end=False)
             step = np.array([dx, dy]) / max(gap, _TINY_GAP)
-            if da @ step < p.track_join_cos or -db @ step < p.track_join_cos:
+            if direction(i, True) @ step < p.track_join_cos:
+                continue
+            if -direction(j, False) @ step < p.track_join_cos:
                 continue
             return i, j
     return None

@@ -24,6 +24,8 @@ _SINGULAR = 1e-18
 _TINY = 1e-12
 #: Gauss-Newton steps per fit (the geometric fit converges from the algebraic one in a few).
 _GAUSS_NEWTON_STEPS = 5
+#: Points (radii times points) per batch of :func:`fit_shared_radius`'s fits, at most.
+_BATCH_POINTS = 400_000
 
 
 def fit_circles(
@@ -242,11 +244,26 @@ def fit_shared_radius(
     radii = np.arange(params.min_radius_m, params.max_radius_m + 1e-9, step)
     cap = params.ransac_tolerance_m**2
     cost = np.empty(len(radii))
-    for i, r in enumerate(radii):  # per radius, every pole's centre at once
-        rr = np.full(len(stacks), r)
-        centre, _ = gauss_newton(xy, lab, inlier, len(stacks), centre0.copy(), rr, fixed=True)
-        res = np.linalg.norm(xy - centre[lab], axis=1) - r
-        cost[i] = np.minimum(np.nan_to_num(res, nan=np.inf) ** 2, cap).sum()
+    n_poles = len(stacks)
+    # Every pole's centre at many radii in one batch of Gauss-Newton fits (the group of a
+    # point at radius k is k * n_poles + its pole): the same sums, far fewer calls.
+    batch = max(1, _BATCH_POINTS // max(len(xy), 1))
+    for start in range(0, len(radii), batch):
+        rs = radii[start : start + batch]
+        k = len(rs)
+        group = (np.arange(k)[:, None] * n_poles + lab[None, :]).ravel()
+        xy_k = np.tile(xy, (k, 1))
+        centre, _ = gauss_newton(
+            xy_k,
+            group,
+            np.tile(inlier, k),
+            k * n_poles,
+            np.tile(centre0, (k, 1)),
+            np.repeat(rs, n_poles),
+            fixed=True,
+        )
+        res = np.linalg.norm(xy_k - centre[group], axis=1).reshape(k, -1) - rs[:, None]
+        cost[start : start + k] = np.minimum(np.nan_to_num(res, nan=np.inf) ** 2, cap).sum(axis=1)
     i = int(np.argmin(cost))
     if 0 < i < len(radii) - 1:  # the parabola through the minimum and its neighbours
         curvature = cost[i - 1] - 2 * cost[i] + cost[i + 1]
