@@ -4,7 +4,7 @@ and the number of Dask workers, and tiled results against whole-drive results.
 Usage::
 
     .venv/bin/python benchmarks/bench_scale.py [--lengths 300,1000,3000] [--workers 1,2]
-        [--repeats 3] [--drives benchmarks/drives] [--json]
+        [--repeats 3] [--drives benchmarks/drives] [--against COMMIT] [--json]
 
 For every length a random street is simulated once (``guardrail simulate --length L --seed
 S``, kept under ``--drives``), then processed by ``guardrail process`` as a subprocess with each
@@ -17,6 +17,12 @@ sampled every 0.1 s. Reported per length and worker count, medians over the repe
 - ``seconds`` and ``realtime``: the drive's own duration divided by the wall time (how many
   times faster than the vehicle recorded it); ``speedup``: seconds with 1 worker over seconds
   with 2.
+
+With ``--against COMMIT``, each drive is also processed by the code of an earlier commit (a
+temporary git worktree, first on the ``PYTHONPATH`` of the command and its workers) and by this
+checkout, one after the other, ``--repeats`` times, with the largest worker count: this
+machine's speed drifts by 10-30 % over an hour, so a change is measured against its
+predecessor in the same minutes (medians of each, and their ratio).
 
 Then tiles against whole: the shortest drive processed with ``--tile-m 100`` and with
 ``--tile-m 0`` (one tile covering the drive): the share of points with the same final label,
@@ -36,7 +42,10 @@ import platform
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -69,11 +78,18 @@ def simulate(drives: Path, length: float, seed: int, image_every: float | None) 
     return out
 
 
-def measure(command: list[str]) -> dict[str, float]:
+def measure(command: list[str], code: Path | None = None) -> dict[str, float]:
     """Run ``command``; its wall seconds and peak resident memory (GB), the whole process tree
-    together and the largest single process."""
+    together and the largest single process. ``code``: a checkout of guardrail to run instead
+    of this one (put first on the workers' path too)."""
+    env, cwd = None, None
+    if code is not None:
+        # From outside this checkout, so that neither the working directory nor the editable
+        # install puts this checkout's package before ``code``'s.
+        env = {**os.environ, "PYTHONPATH": str(code)}
+        cwd = code.parent
     start = time.perf_counter()
-    process = subprocess.Popen(command, stdout=subprocess.DEVNULL)
+    process = subprocess.Popen(command, stdout=subprocess.DEVNULL, env=env, cwd=cwd)
     root = psutil.Process(process.pid)
     peak_total = peak_one = 0
     while process.poll() is None:
@@ -100,11 +116,51 @@ def measure(command: list[str]) -> dict[str, float]:
     }
 
 
-def process(drive: Path, run: Path, workers: int, tile_m: float) -> dict[str, float]:
+def process(
+    drive: Path, run: Path, workers: int, tile_m: float, code: Path | None = None
+) -> dict[str, float]:
     return measure(
         [*GUARDRAIL, "process", str(drive), "--out", str(run), "--overwrite", "--quiet"]
-        + ["--workers", str(workers), "--tile-m", str(tile_m)]
+        + ["--workers", str(workers), "--tile-m", str(tile_m)],
+        code,
     )
+
+
+@contextmanager
+def checkout(commit: str) -> Iterator[Path]:
+    """A detached worktree of ``commit`` in a temporary folder (removed afterwards)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "guardrail"
+        subprocess.run(
+            ["git", "-C", str(ROOT), "worktree", "add", "--detach", "-q", str(path), commit],
+            check=True,
+        )
+        try:
+            yield path
+        finally:
+            subprocess.run(
+                ["git", "-C", str(ROOT), "worktree", "remove", "--force", str(path)], check=True
+            )
+
+
+def against(drive: Path, runs_dir: Path, workers: int, repeats: int, commit: str) -> dict:
+    """``process`` of this checkout and of ``commit``, interleaved ``repeats`` times (the
+    machine's speed drifts over minutes): the median seconds of each and their ratio."""
+    seconds: dict[str, list[float]] = {"before": [], "now": []}
+    with checkout(commit) as code:
+        for _ in range(repeats):
+            for name, where in (("before", code), ("now", None)):
+                run = runs_dir / f"{drive.name}_{name}"
+                seconds[name].append(process(drive, run, workers, 100.0, where)["seconds"])
+    before, now = (statistics.median(seconds[k]) for k in ("before", "now"))
+    return {
+        "commit": commit,
+        "workers": workers,
+        "seconds": seconds,
+        "before": before,
+        "now": now,
+        "speedup": before / now,
+    }
 
 
 def final_labels(run: Path) -> np.ndarray:
@@ -137,6 +193,12 @@ def main() -> int:
     parser.add_argument(
         "--no-check", action="store_true", help="leave out the tiles-against-whole check"
     )
+    parser.add_argument(
+        "--against",
+        metavar="COMMIT",
+        help="also run the code of COMMIT (a git worktree) on each drive, interleaved with this "
+        "checkout's runs, with the largest worker count: before and now in the same minutes",
+    )
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     lengths = [float(v) for v in args.lengths.split(",")]
@@ -168,6 +230,14 @@ def main() -> int:
                     "runs": samples,
                 }
             )
+    comparisons = []
+    if args.against:
+        for length in lengths:
+            drive = simulate(args.drives, length, args.seed, args.image_every)
+            comparisons.append(
+                {"length_m": length}
+                | against(drive, runs_dir, max(worker_counts), args.repeats, args.against)
+            )
     speedups = {}
     for length in lengths:
         by_workers = {r["workers"]: r["seconds"] for r in rows if r["length_m"] == length}
@@ -190,7 +260,13 @@ def main() -> int:
     if args.json:
         print(
             json.dumps(
-                {"rows": rows, "speedup": speedups, "tiles_vs_whole": check, "machine": machine},
+                {
+                    "rows": rows,
+                    "speedup": speedups,
+                    "against": comparisons,
+                    "tiles_vs_whole": check,
+                    "machine": machine,
+                },
                 indent=2,
             )
         )
@@ -208,6 +284,11 @@ def main() -> int:
     for length, speedup in speedups.items():
         print(
             f"speed-up 1 -> 2 workers at {length:.0f} m: {speedup:.2f}x (target {TARGET_SPEEDUP})"
+        )
+    for c in comparisons:
+        print(
+            f"{c['length_m']:.0f} m, {c['workers']} workers: {c['before']:.1f} s at {c['commit']}, "
+            f"{c['now']:.1f} s now ({c['speedup']:.2f}x; medians of interleaved runs)"
         )
     if check is not None:
         print(

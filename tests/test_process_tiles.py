@@ -117,6 +117,83 @@ def test_folder_processing_in_process_equals_the_in_memory_run(
     assert phases["tiles"] > 0 and sum(phases.values()) <= timings["total_seconds"]
 
 
+def test_parts_stitched_as_they_end_in_any_order_give_the_same_run(
+    tiled_drive: Path, model_path: Path, tiled_run: Path, tmp_path: Path, monkeypatch
+):
+    """Tiles end in any order on a cluster: each part is joined once those before it are, and
+    each drive tile's points are written as soon as the parts reading it are joined."""
+    import guardrail_core.process.pipeline as pipeline
+    import guardrail_core.process.stitch as stitch
+
+    real_map = pipeline.map_tasks
+    events: list[str] = []
+
+    def ends_in_reverse(client, function, items, *, on_result=None, **options):
+        results = real_map(client, function, items, **options)
+        if on_result is not None:
+            for i in reversed(range(len(results))):
+                events.append(f"end {i}")
+                on_result(i, results[i])
+        return results
+
+    real_write = stitch.write_point_tile
+
+    def write(folder, tile, segment):
+        events.append(f"points {tile}")
+        real_write(folder, tile, segment)
+
+    monkeypatch.setattr(pipeline, "map_tasks", ends_in_reverse)
+    monkeypatch.setattr(stitch, "write_point_tile", write)
+    out = tmp_path / "run"
+    info = process_drive_folder(
+        tiled_drive, model_path, out, tile_m=TILE_M, cluster=ClusterSpec(workers=0)
+    )
+    # The same run as the tiles stitched in order (in memory): segments numbered alike.
+    assert np.array_equal(final_labels(out), final_labels(tiled_run))
+    in_order = RunFolder.open(tiled_run)
+    assert RunFolder.open(out).info().counts == in_order.info().counts
+    for name, column in RunFolder.open(out).segments().items():
+        np.testing.assert_array_equal(column, in_order.segments()[name], err_msg=name)
+    assert np.array_equal(RunFolder.open(out).point_segment(), in_order.point_segment())
+    # Nothing could be joined before tile 0 ended, last; then every drive tile was written.
+    tiles = len(info.processing.tiles) if info.processing else 0
+    assert events[:tiles] == [f"end {i}" for i in reversed(range(tiles))]
+    assert sorted(events[tiles:]) == sorted(f"points {d}" for d in range(info.drive.tiles))
+
+
+def test_drive_tiles_are_written_while_later_tiles_still_run(
+    tiled_drive: Path, model_path: Path, tmp_path: Path, monkeypatch
+):
+    import guardrail_core.process.stitch as stitch
+
+    events: list[str] = []
+    real_write = stitch.write_point_tile
+    real_add = stitch.PartStitcher.add
+
+    def write(folder, tile, segment):
+        events.append("points")
+        real_write(folder, tile, segment)
+
+    def add(self, k, part):
+        events.append("part")
+        real_add(self, k, part)
+
+    monkeypatch.setattr(stitch, "write_point_tile", write)
+    monkeypatch.setattr(stitch.PartStitcher, "add", add)
+    # Narrow margins, so that the first tiles' windows do not read the last drive tiles.
+    process_drive_folder(
+        tiled_drive,
+        model_path,
+        tmp_path / "run",
+        tile_m=TILE_M,
+        margin_m=2.0,
+        cluster=ClusterSpec(workers=0),
+    )
+    assert events.count("part") >= 3
+    # Point tiles come out between the parts, not all after the last one.
+    assert events.index("points") < len(events) - 1 - events[::-1].index("part")
+
+
 def test_a_window_reads_only_the_drive_tiles_it_touches(tiled_drive: Path, tmp_path: Path):
     """Every drive tile a processing tile's window does not touch is unreadable: the window
     still reads, and holds exactly the points of the tiles it touches that lie in it."""
