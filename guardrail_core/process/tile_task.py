@@ -345,7 +345,8 @@ def _near(xy: np.ndarray, targets: np.ndarray, candidates: np.ndarray, reach: fl
     span = size * np.hypot(np.abs(dx) + 1, np.abs(dy) + 1)
     possible = np.zeros(shape, bool)
     sure = np.zeros(shape, bool)
-    for offsets, grid in ((gap <= reach, possible), (span < reach, sure)):
+    # A part in a billion to spare: a point on a cell's edge may round into its neighbour.
+    for offsets, grid in ((gap <= reach * (1 + 1e-9), possible), (span < reach * (1 - 1e-9), sure)):
         for ox, oy in zip(dx[offsets], dy[offsets], strict=True):
             grid[occupied[:, 0] + ox, occupied[:, 1] + oy] = True
     cell = np.floor((xy[ids] - corner) / size).astype(np.int64)
