@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from guardrail_core.errors import GuardrailError
-from guardrail_core.extract.lattice import Lattice, build_lattice, lattice_normals
+from guardrail_core.extract.lattice import Lattice, build_lattice, lattice_normals, neighbour_at
 
 
 def shuffled_grid(
@@ -250,3 +250,19 @@ def test_neighbours_and_normals_of_a_subset_equal_those_of_all_points() -> None:
         xyz, lattice, max_neighbour_distance_m=0.5, points=np.zeros(0, np.int64)
     )
     assert empty.shape == (0, 3) and empty_valid.shape == (0,)
+
+
+def test_the_compiled_neighbour_lookup_is_the_lattices() -> None:
+    """neighbour_at (what the compiled normals and components use) answers as neighbour does,
+    gaps, duplicates and the grid's edges included."""
+    rng = np.random.default_rng(5)
+    phases = 7
+    rotation = rng.integers(10, 16, 60)
+    phase = rng.integers(0, phases, 60)
+    lattice = build_lattice(rotation, phase, phases)
+    grid = lattice.grid.ravel()
+    for d_rotation, d_phase in [(0, 1), (0, -3), (1, 0), (-1, 2), (2, -6), (6, 0), (0, 0)]:
+        expected = lattice.neighbour(d_rotation, d_phase)
+        step = d_rotation * phases + d_phase
+        got = [neighbour_at(int(c), step, grid) for c in lattice.cell]
+        np.testing.assert_array_equal(got, expected)

@@ -127,13 +127,26 @@ def lattice_normals(
         points,
         cell,
         lattice.grid.ravel(),
-        lattice.grid.shape[1],
-        int(phase_step),
+        # Flat steps to the neighbours along the scan line and across it: +k, -k, +1 line, -1.
+        np.array([phase_step, -phase_step, lattice.phases, -lattice.phases], np.int64),
         float(max_neighbour_distance_m) ** 2,
         normals,
         valid,
     )
     return normals, valid
+
+
+@numba.njit(cache=True, nogil=True)
+def neighbour_at(cell: int, step: int, grid: np.ndarray) -> int:  # pragma: no cover - compiled
+    """:meth:`Lattice.neighbour` of one point, for compiled loops: the point at the flat
+    offset ``step`` (``d_rotation * phases + d_phase``) from flat ``cell`` in the raveled
+    ``grid``; -1 where there is none."""
+    if cell < 0:
+        return -1
+    target = cell + step
+    if target < 0 or target >= len(grid):
+        return -1
+    return grid[target]
 
 
 # Compiled: one pass per point instead of some 30 numpy passes over the low points of a tile
@@ -144,15 +157,13 @@ def _normals(
     points: np.ndarray,
     cell: np.ndarray,
     grid: np.ndarray,
-    phases: int,
-    phase_step: int,
+    steps: np.ndarray,
     max_sq: float,
     normals: np.ndarray,
     valid: np.ndarray,
 ) -> None:  # pragma: no cover - compiled
-    """Fill ``normals`` (M, 3) and ``valid`` (M,) of :func:`lattice_normals`."""
-    size = len(grid)
-    steps = np.array([[0, phase_step], [0, -phase_step], [1, 0], [-1, 0]])
+    """Fill ``normals`` (M, 3) and ``valid`` (M,) of :func:`lattice_normals`; ``steps`` (4,):
+    flat lattice offsets of the neighbours ahead and behind along the line, then across."""
     near = np.empty((4, 3))
     for m in range(len(points)):
         i = points[m]
@@ -160,12 +171,9 @@ def _normals(
             near[k, 0] = xyz[i, 0]
             near[k, 1] = xyz[i, 1]
             near[k, 2] = xyz[i, 2]
-            if cell[m] < 0:
+            j = neighbour_at(cell[m], steps[k], grid)
+            if j < 0:
                 continue
-            target = cell[m] + steps[k, 0] * phases + steps[k, 1]
-            if target < 0 or target >= size or grid[target] < 0:
-                continue
-            j = grid[target]
             d0 = xyz[j, 0] - xyz[i, 0]
             d1 = xyz[j, 1] - xyz[i, 1]
             d2 = xyz[j, 2] - xyz[i, 2]

@@ -13,7 +13,7 @@ import numba
 import numpy as np
 from scipy.spatial import cKDTree
 
-from guardrail_core.extract.lattice import Lattice
+from guardrail_core.extract.lattice import Lattice, neighbour_at
 from guardrail_core.params import StageParams, param
 
 #: Sums of bin widths that should equal a length differ from it by rounding only.
@@ -187,16 +187,13 @@ def _link(
 ) -> np.ndarray:  # pragma: no cover - compiled
     """(N,) int64: a root point of every kept point's component (each point its own root where
     not kept). ``step`` (K,): the flat lattice offsets of the edges each point links forward."""
-    n, size = len(kept), len(grid)
+    n = len(kept)
     parent = np.arange(n)
     for a in range(n):
-        if not kept[a] or cell[a] < 0:
+        if not kept[a]:
             continue
         for k in range(len(step)):
-            target = cell[a] + step[k]
-            if target < 0 or target >= size:
-                continue
-            b = grid[target]
+            b = neighbour_at(cell[a], step[k], grid)
             if b < 0 or not kept[b]:
                 continue
             d0 = xyz[a, 0] - xyz[b, 0]

@@ -41,13 +41,18 @@ def empty_glb() -> bytes:
     )
 
 
-def _write(path: Path, data: object) -> None:
-    """Write what a trimesh exporter returned (bytes, or text as UTF-8)."""
+def _as_bytes(data: object) -> bytes:
+    """What a trimesh exporter returned (bytes, or text as UTF-8), as bytes."""
     if isinstance(data, str):
         data = data.encode("utf-8")
     if not isinstance(data, bytes):
         raise TypeError(f"an exporter returned {type(data).__name__}, not bytes or text")
-    path.write_bytes(data)
+    return data
+
+
+def _write(path: Path, data: object) -> None:
+    """Write what a trimesh exporter returned."""
+    path.write_bytes(_as_bytes(data))
 
 
 def export_mesh_files(
@@ -55,15 +60,7 @@ def export_mesh_files(
 ) -> dict[str, bytes]:
     """A run's mesh file in each format, as :func:`write_meshes` writes it: {format: bytes}
     (made where the mesh is made: a worker of ``guardrail process``)."""
-    out: dict[str, bytes] = {}
-    for fmt in formats:
-        data = mesh.export(file_type=fmt)
-        if isinstance(data, str):
-            data = data.encode("utf-8")
-        if not isinstance(data, bytes):
-            raise TypeError(f"an exporter returned {type(data).__name__}, not bytes or text")
-        out[fmt] = data
-    return out
+    return {fmt: _as_bytes(mesh.export(file_type=fmt)) for fmt in formats}
 
 
 def write_meshes(
