@@ -3,7 +3,7 @@
 Usage::
 
     .venv/bin/python benchmarks/accuracy.py [--streets 10] [--workers 2]
-        [--data benchmarks/data/accuracy] [--json]
+        [--data benchmarks/data/accuracy] [--set STAGE.NAME=VALUE ...] [--json]
 
 **The rule.** Seeds 10001-19999 belong to this benchmark alone: no training drive, test, example,
 figure or tuning uses them (``tests/test_accuracy_seeds.py`` fails if another file of the
@@ -42,6 +42,7 @@ import platform
 import shutil
 import sys
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -50,6 +51,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from guardrail_core.classes import GUARDRAIL_CLASSES  # noqa: E402
+from guardrail_core.cli.common import process_params  # noqa: E402
 from guardrail_core.distributed import ClusterSpec  # noqa: E402
 from guardrail_core.evaluate.misses import (  # noqa: E402
     MissBreakdown,
@@ -98,15 +100,25 @@ def ensure_street(data: Path, seed: int) -> Path:
     return out
 
 
-def measure_street(drive: Path, run: Path, workers: int, reuse: bool = False) -> dict:
-    """Process one street with the default model (``reuse``: keep a run already there) and
-    compare the run with its truth."""
+def measure_street(
+    drive: Path, run: Path, workers: int, reuse: bool = False, settings: Sequence[str] = ()
+) -> dict:
+    """Process one street with the default model (``reuse``: keep a run already there;
+    ``settings``: ``guardrail process --set`` values) and compare the run with its truth."""
     seconds = None  # a run reused
     if not (reuse and (run / "run.json").is_file()):
         if run.exists():
             shutil.rmtree(run)
         clock = time.perf_counter()
-        process_drive_folder(drive, DEFAULT_MODEL_DIR, run, cluster=ClusterSpec(workers=workers))
+        extraction, reconstruction = process_params(list(settings))
+        process_drive_folder(
+            drive,
+            DEFAULT_MODEL_DIR,
+            run,
+            params=extraction,
+            reconstruction=reconstruction,
+            cluster=ClusterSpec(workers=workers),
+        )
         seconds = round(time.perf_counter() - clock, 1)
     # One pass over the drive's tiles: the truth of every segment (as ``guardrail evaluate``
     # takes it: most of its points) and the points around every true pole.
@@ -300,6 +312,14 @@ def main() -> int:
         help="evaluate the runs a previous call left in DATA/runs instead of processing again "
         "(only after a change to the evaluation, never to the method)",
     )
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="STAGE.NAME=VALUE",
+        help="a parameter as `guardrail process --set` takes it (repeatable), to measure a "
+        "change against the defaults on the same streets (its runs go to DATA/runs_set)",
+    )
     args = parser.parse_args()
     args.data.mkdir(parents=True, exist_ok=True)
     streets = []
@@ -307,7 +327,11 @@ def main() -> int:
         drive = ensure_street(args.data, seed)
         print(f"processing {drive.name} ...", file=sys.stderr, flush=True)
         result = measure_street(
-            drive, args.data / "runs" / drive.name, args.workers, reuse=args.reuse_runs
+            drive,
+            args.data / ("runs" if not args.set else "runs_set") / drive.name,
+            args.workers,
+            reuse=args.reuse_runs,
+            settings=args.set,
         )
         streets.append({"seed": seed, **result})
     summary = summarise(streets)

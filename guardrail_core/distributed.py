@@ -119,6 +119,25 @@ def dask_client(spec: ClusterSpec) -> Iterator[Any]:
         cluster.close()
 
 
+def on_every_worker(client: Any, target: str, *args: Any) -> list[Any]:
+    """Start ``module:function`` (``target``) with ``args`` once on every worker of ``client`` as
+    a task (one that prepares the worker, say) and return its futures without waiting. Named,
+    not passed, so that this process need not import the function's module."""
+    workers = list(client.scheduler_info()["workers"])
+    return [
+        client.submit(call, target, *args, workers=[w], allow_other_workers=False, pure=False)
+        for w in workers
+    ]
+
+
+def call(target: str, *args: Any) -> Any:
+    """``module:function`` (``target``) called with ``args``."""
+    import importlib
+
+    module, _, name = target.partition(":")
+    return getattr(importlib.import_module(module), name)(*args)
+
+
 @dataclass(frozen=True)
 class TaskFailure(Generic[T]):
     """A task that failed beyond Dask's retries: its input and the error, as text."""
@@ -193,3 +212,71 @@ def map_tasks(
                         raise error
                     record(i, TaskFailure(items[i], f"{type(error).__name__}: {error}"))
     return [r for r in results if r is not None]
+
+
+class LaterTasks(Generic[T, R]):
+    """Tasks of ``function`` started one by one while other work runs (from the ``on_result``
+    of :func:`map_tasks`, say), and collected at the end.
+
+    On the cluster each starts at once, ahead of the tasks still queued (Dask ``priority``):
+    its work overlaps theirs instead of waiting for the last of them. Without a client each
+    runs here when it is started. Failures are as in :func:`map_tasks`.
+    """
+
+    def __init__(
+        self,
+        client: Any,
+        function: Callable[[T], R],
+        *,
+        failures: tuple[type[BaseException], ...] = (),
+        priority: int = 1,
+    ) -> None:
+        self.client = client
+        self.function = function
+        self.failures = failures
+        self.priority = priority
+        self._items: list[T] = []
+        self._done: dict[int, R | TaskFailure[T]] = {}
+        self._futures: list[Any] = []
+
+    @property
+    def items(self) -> list[T]:
+        """The items started, in order."""
+        return list(self._items)
+
+    def start(self, item: T) -> None:
+        """Start ``function(item)``."""
+        self._items.append(item)
+        if self.client is None:
+            try:
+                self._done[len(self._items) - 1] = self.function(item)
+            except self.failures as exc:
+                self._done[len(self._items) - 1] = TaskFailure(item, f"{type(exc).__name__}: {exc}")
+            return
+        self._futures.append(
+            self.client.submit(self.function, item, pure=False, priority=self.priority)
+        )
+
+    def results(self, *, desc: str, unit: str, progress: bool) -> list[R | TaskFailure[T]]:
+        """Every task's result, in the order they were started, once all have ended (with a
+        progress bar)."""
+        if self._futures:
+            from dask.distributed import as_completed
+            from distributed.scheduler import KilledWorker
+
+            position = {future.key: i for i, future in enumerate(self._futures)}
+            with tqdm(total=len(self._futures), desc=desc, unit=unit, disable=not progress) as bar:
+                for future in as_completed(self._futures):
+                    self._collect(future, position[future.key], KilledWorker)
+                    bar.update()
+        return [self._done[i] for i in range(len(self._items))]
+
+    def _collect(self, future: Any, i: int, killed: type[BaseException]) -> None:
+        if future.status == "finished":
+            self._done[i] = future.result()
+            return
+        error = future.exception()
+        if not isinstance(error, (killed, *self.failures)):
+            self.client.cancel(self._futures)
+            raise error
+        self._done[i] = TaskFailure(self._items[i], f"{type(error).__name__}: {error}")

@@ -18,6 +18,7 @@ class, the field, what is allowed and what came.
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import typing
 from collections.abc import Mapping, Sequence
@@ -262,3 +263,86 @@ def _in_range(value: float, meta: Mapping[str, Any]) -> bool:
 def has_unit_suffix(name: str) -> bool:
     """Whether a parameter's name ends in one of the unit suffixes."""
     return name.endswith(_UNIT_SUFFIXES)
+
+
+G = TypeVar("G")
+
+
+def apply_settings(
+    params: G, stages: Mapping[str, type[StageParams]], settings: Sequence[str], what: str
+) -> G:
+    """``params`` (a frozen dataclass whose fields are ``stages``, each a :class:`StageParams`)
+    with ``STAGE.NAME=VALUE`` settings applied (the CLI's ``--set``).
+
+    NAME is a field of the stage's parameters (or a name of an earlier version); VALUE is read as
+    the field's type: an integer, a number, ``true``/``false``, text, or JSON for a tuple. Each
+    stage is checked once, after all its settings, so their order does not matter. ``what``
+    names the parameters in errors (``"reconstruction"``).
+
+    Raises
+    ------
+    ParameterError
+        A setting not of that form, an unknown stage or name, or a value of the wrong type or
+        out of range; the message names ``STAGE.NAME``.
+    """
+    changes: dict[str, dict[str, Any]] = {}
+    for setting in settings:
+        key, sep, text = setting.partition("=")
+        stage, dot, name = key.strip().partition(".")
+        if not sep or not dot:
+            raise ParameterError(f"expected STAGE.NAME=VALUE, got {setting!r}")
+        if stage not in stages:
+            raise ParameterError(
+                f"unknown {what} stage {stage!r} in {setting!r} (known: {', '.join(stages)})"
+            )
+        kind = stages[stage]
+        name = kind.renamed.get(name, name)
+        hints = typing.get_type_hints(kind)
+        names = [f.name for f in dataclasses.fields(kind)]
+        if name not in names:
+            raise ParameterError(
+                f"unknown {what} parameter {stage}.{name} (known: {', '.join(names)})"
+            )
+        value = _setting_value(f"{stage}.{name}", hints[name], text.strip())
+        changes.setdefault(stage, {})[name] = value
+    parts = {}
+    for stage, values in changes.items():
+        try:
+            parts[stage] = dataclasses.replace(getattr(params, stage), **values)
+        except ParameterError as exc:
+            raise ParameterError(f"{stage}: {exc}") from exc
+    return dataclasses.replace(params, **parts)  # type: ignore[type-var]
+
+
+#: How each type of parameter is read from text, for the error that names what was expected.
+_KIND_WORDS = {bool: "true or false", int: "an integer", float: "a number"}
+
+
+def _setting_value(where: str, kind: Any, text: str) -> Any:
+    """The text of a ``--set`` value as the parameter's type ``kind`` (its annotation).
+
+    Raises
+    ------
+    ParameterError
+        ``text`` is not a value of that type; names ``where`` (``STAGE.NAME``).
+    """
+    try:
+        if kind is bool:
+            word = text.lower()
+            if word not in ("true", "false"):
+                raise ValueError(text)
+            return word == "true"
+        if kind is int:
+            try:
+                return int(text)
+            except ValueError:
+                return float(text)  # 16.0 reads as 16; the stage refuses 16.5 by name
+        if kind is float:
+            return float(text)
+        if kind is str:
+            return text
+        value = json.loads(text)  # a tuple (colours) as a JSON list
+        return tuple(value) if isinstance(value, list) else value
+    except ValueError as exc:
+        what = _KIND_WORDS.get(kind, "a JSON value")
+        raise ParameterError(f"{where} must be {what}, got {text!r}") from exc

@@ -48,12 +48,35 @@ def test_train_then_process_from_the_command_line(
     info = json.loads((model / "model.json").read_text())
     assert info["trained_on"]["drives"][0]["drive"] == str(drive_path.resolve())
     run = tmp_path / "run"
-    assert (
-        main(["process", str(drive_path), "--model", str(model), "--out", str(run), "--quiet"]) == 0
-    )
+    settings = ["--set", "classify.crop_probability_clip=0.05", "--set", "runs.min_points=150"]
+    command = ["process", str(drive_path), "--model", str(model), "--out", str(run), "--quiet"]
+    assert main(command + settings) == 0
     out = capsys.readouterr().out
     assert "segments from" in out and "after label correction" in out
     assert (run / "timings.json").is_file()
+    params = json.loads((run / "run.json").read_text())["params"]
+    assert params["classify"]["crop_probability_clip"] == 0.05
+    models = json.loads((run / "reconstruction" / "models.json").read_text())
+    assert models["params"]["runs"]["min_points"] == 150
+
+
+@pytest.mark.parametrize(
+    ("setting", "message"),
+    [
+        ("classify.crop_probability_clip=0.7", "crop_probability_clip must lie within"),
+        ("classify.bogus=1", "unknown extraction parameter classify.bogus"),
+        ("lanes.width_m=3", "unknown stage 'lanes'"),
+        ("poles", "expected STAGE.NAME=VALUE"),
+    ],
+)
+def test_process_refuses_a_bad_setting_before_any_work(
+    drive_path: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], setting: str, message: str
+) -> None:
+    run = tmp_path / "run"
+    assert main(["process", str(drive_path), "--out", str(run), "--set", setting]) == 2
+    err = capsys.readouterr().err
+    assert "ParameterError" in err and message in err
+    assert not run.exists()
 
 
 def test_process_refuses_a_model_of_another_format_version(

@@ -16,6 +16,7 @@ from pathlib import Path
 import pytest
 
 from guardrail_core.cli import build_parser, main
+from guardrail_core.cli.common import process_params
 from guardrail_core.reconstruct.pipeline import ReconstructionParams
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -73,14 +74,17 @@ def test_every_readme_command_parses(command: str):
         return
     args = build_parser().parse_args(argv)  # argparse exits on an unknown command or option
     assert callable(args.func)
-    ReconstructionParams().with_settings(_settings(argv))
+    if argv[0] == "process":  # extraction and reconstruction settings
+        process_params(_settings(argv))
+    else:
+        ReconstructionParams().with_settings(_settings(argv))
 
 
 def test_every_setting_in_the_help_texts_is_valid():
     settings = [s for text in help_texts() for s in SETTING.findall(text)]
     assert settings, "the --set help gives an example"
-    for setting in settings:
-        ReconstructionParams().with_settings([setting])
+    for setting in settings:  # process takes both; the other commands' are reconstruction's
+        process_params([setting])
 
 
 def test_every_command_line_in_the_help_texts_parses():

@@ -176,7 +176,7 @@ def test_drive_tiles_are_written_while_later_tiles_still_run(
 
     def add(self, k, part):
         events.append("part")
-        real_add(self, k, part)
+        return real_add(self, k, part)
 
     monkeypatch.setattr(stitch, "write_point_tile", write)
     monkeypatch.setattr(stitch.PartStitcher, "add", add)
@@ -192,6 +192,37 @@ def test_drive_tiles_are_written_while_later_tiles_still_run(
     assert events.count("part") >= 3
     # Point tiles come out between the parts, not all after the last one.
     assert events.index("points") < len(events) - 1 - events[::-1].index("part")
+
+
+def test_runs_closed_as_the_tiles_end_give_the_models_of_runs_closed_at_the_end(
+    tiled_drive: Path, model_path: Path, tiled_run: Path, tmp_path: Path, monkeypatch
+):
+    """A drive folder's runs are reconstructed as they are closed (the drive tiles' bounds say
+    where points may still come: tests/test_run_stream.py); the models and meshes are those of
+    the same tiles with every run closed after the last (the in-memory run, which has no
+    bounds)."""
+    import guardrail_core.process.pipeline as pipeline
+
+    started: list[int] = []
+    real_reconstruct = pipeline.reconstruct_run_meshes
+
+    def reconstruct(run, params):
+        started.append(run.run_id)
+        return real_reconstruct(run, params=params)
+
+    monkeypatch.setattr(pipeline, "reconstruct_run_meshes", reconstruct)
+    out = tmp_path / "run"
+    process_drive_folder(
+        tiled_drive, model_path, out, tile_m=TILE_M, cluster=ClusterSpec(workers=0)
+    )
+    assert sorted(started) == list(range(len(run_models(tiled_run))))
+    assert len(started) > 1
+    streamed = json.loads((out / "reconstruction" / "models.json").read_text())
+    at_end = json.loads((tiled_run / "reconstruction" / "models.json").read_text())
+    streamed.pop("seconds"), at_end.pop("seconds")
+    assert streamed == at_end
+    for mesh in sorted((tiled_run / "reconstruction" / "meshes").iterdir()):
+        assert (out / "reconstruction" / "meshes" / mesh.name).read_bytes() == mesh.read_bytes()
 
 
 def test_a_window_reads_only_the_drive_tiles_it_touches(tiled_drive: Path, tmp_path: Path):
@@ -298,7 +329,11 @@ def test_a_local_cluster_run_equals_the_in_process_run_and_survives_a_killed_wor
     assert killed, "a worker was killed while it held a tile"
     assert info.processing is not None and not info.processing.failed
     assert np.array_equal(final_labels(out), final_labels(whole_run))
-    assert len(run_models(out)) == len(run_models(whole_run))
+    # The runs, reconstructed on the workers as they were closed, numbered as in the whole drive.
+    on_cluster = json.loads((out / "reconstruction" / "models.json").read_text())
+    whole = json.loads((whole_run / "reconstruction" / "models.json").read_text())
+    on_cluster.pop("seconds"), whole.pop("seconds")
+    assert on_cluster == whole and len(whole["runs"]) > 1
 
 
 def test_the_road_near_guardrails_is_what_a_full_distance_query_finds() -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 from pathlib import Path
 
@@ -119,7 +120,9 @@ def test_the_proba_range_holds_every_crop_probability_and_is_reached() -> None:
         head.proba_range(features[:, :2])
 
 
-def test_where_the_shape_decides_every_crop_gives_the_same_label() -> None:
+@pytest.mark.parametrize("clip", [1e-5, 0.01, 0.2])
+def test_where_the_shape_decides_every_crop_gives_the_same_label(clip: float) -> None:
+    """Exact at every clip of the crop probabilities (ClassifyParams.crop_probability_clip)."""
     model = load_model(DEFAULT_MODEL_DIR)
     head = model.segment_head
     assert head is not None
@@ -128,14 +131,36 @@ def test_where_the_shape_decides_every_crop_gives_the_same_label() -> None:
     features = (
         head.mean[:n_features] + head.scale[:n_features] * rng.normal(size=(500, n_features))
     ).astype(np.float32)
-    decided = model.shape_decides(features)
-    assert 0.1 < decided.mean() < 0.9
+    decided = model.shape_decides(features, clip)
+    assert 0.1 < decided.mean() < 0.99  # some segments left to the crop at every clip
     n = len(features)
     crop_probabilities = [np.full(n, p) for p in (0.0, 1e-3, 0.3, 0.5, 0.7, 1.0)]
     crop_probabilities += list(rng.random((5, n)))  # a different crop for every segment
     labels = np.stack(
-        [model.segment_proba(features, p) >= model.threshold for p in crop_probabilities]
+        [model.segment_proba(features, p, clip) >= model.threshold for p in crop_probabilities]
     )
     assert np.all(labels[:, decided] == labels[0, decided])
-    lo, hi = head.proba_range(features[~decided])
+    lo, hi = head.proba_range(features[~decided], clip)
     assert np.all((lo < model.threshold + 1e-4) & (hi >= model.threshold - 1e-4))
+    # A crop beyond the clip counts as one at it.
+    for p, at in ((0.0, clip), (1.0, 1 - clip)):
+        np.testing.assert_array_equal(
+            model.segment_proba(features, np.full(n, p), clip),
+            model.segment_proba(features, np.full(n, at), clip),
+        )
+
+
+def test_a_wider_clip_leaves_the_shape_more_to_decide() -> None:
+    """The shape decides more segments the less a crop may say (what makes the CNN cheaper)."""
+    model = load_model(DEFAULT_MODEL_DIR)
+    head = model.segment_head
+    assert head is not None
+    rng = np.random.default_rng(4)
+    n_features = head.n_inputs - 2
+    features = (
+        head.mean[:n_features] + head.scale[:n_features] * rng.normal(size=(2000, n_features))
+    ).astype(np.float32)
+    decided = [model.shape_decides(features, clip) for clip in (1e-5, 1e-3, 0.01, 0.1, 0.3)]
+    for narrow, wide in itertools.pairwise(decided):
+        assert np.all(wide[narrow])  # what the shape decided, it still decides
+    assert decided[0].sum() < decided[2].sum() < decided[4].sum()

@@ -7,10 +7,12 @@ the parser's own, so a command keeps the shared ones last by giving its own as t
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
+    from guardrail_core.extract.pipeline import ExtractionParams
     from guardrail_core.formats.run_info import ReconstructionSummary
     from guardrail_core.reconstruct.pipeline import ReconstructionParams
 
@@ -78,6 +80,37 @@ def reconstruction_params(args: argparse.Namespace) -> ReconstructionParams:
             raise InvalidOptionError(f"--params {args.params}: cannot read it ({exc})") from exc
         params = ReconstructionParams.from_json(data.get("params", data))
     return params.with_settings(getattr(args, "set", None) or [])
+
+
+def process_params(settings: list[str]) -> tuple[ExtractionParams, ReconstructionParams]:
+    """The extraction and reconstruction parameters of ``guardrail process --set``: each
+    ``STAGE.NAME=VALUE`` goes to the parameters that have that stage.
+
+    Raises :class:`~guardrail_core.params.ParameterError` for a setting of no stage of either.
+    """
+    from guardrail_core.extract.pipeline import ExtractionParams
+    from guardrail_core.params import ParameterError
+    from guardrail_core.reconstruct.pipeline import ReconstructionParams
+
+    extraction_stages = [f.name for f in dataclasses.fields(ExtractionParams)]
+    reconstruction_stages = list(ReconstructionParams.stage_classes())
+    chosen: dict[str, list[str]] = {"extraction": [], "reconstruction": []}
+    for setting in settings:
+        stage = setting.partition("=")[0].partition(".")[0].strip()
+        if stage in extraction_stages:
+            chosen["extraction"].append(setting)
+        elif stage in reconstruction_stages:
+            chosen["reconstruction"].append(setting)
+        else:
+            raise ParameterError(
+                f"unknown stage {stage!r} in {setting!r} (extraction: "
+                f"{', '.join(extraction_stages)}; reconstruction: "
+                f"{', '.join(reconstruction_stages)})"
+            )
+    return (
+        ExtractionParams().with_settings(chosen["extraction"]),
+        ReconstructionParams().with_settings(chosen["reconstruction"]),
+    )
 
 
 def reconstruction_summary(summary: ReconstructionSummary) -> str:

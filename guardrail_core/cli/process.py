@@ -19,6 +19,15 @@ def add_parser(subparsers: common.Subparsers) -> None:
         "on simulated drives of a profile and a multi-beam scanner)",
     )
     own.add_argument("--out", type=Path, required=True, help="run folder to write")
+    own.add_argument(
+        "--set",
+        action="append",
+        metavar="STAGE.NAME=VALUE",
+        help="one extraction or reconstruction parameter, e.g. "
+        "classify.crop_probability_clip=1e-05 or pipes.slice_interval_m=0.02 (repeatable; "
+        "stages: road, segments, crops, classify, correction; runs, poles, units, register, "
+        "pipes, beams, sweep)",
+    )
     tiles = own.add_argument_group("tiles and workers")
     tiles.add_argument(
         "--tile-m",
@@ -69,26 +78,44 @@ def add_parser(subparsers: common.Subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from guardrail_core.distributed import ClusterSpec, default_workers
-    from guardrail_core.extract.model_folder import DEFAULT_MODEL_DIR, load_model
-    from guardrail_core.process import DEFAULT_MARGIN_M, process_drive_folder
+    from guardrail_core.distributed import (
+        ClusterSpec,
+        dask_client,
+        default_workers,
+        on_every_worker,
+    )
 
-    model_dir = args.model or DEFAULT_MODEL_DIR
-    model = load_model(model_dir)
-    if args.model is None:
-        print(f"model: the default model shipped with guardrail ({model.version})")
     workers = default_workers() if args.workers is None else args.workers
     cluster = ClusterSpec(workers=workers, scheduler=args.scheduler, memory_limit=args.memory_limit)
-    info = process_drive_folder(
-        args.drive,
-        model_dir,
-        args.out,
-        overwrite=args.overwrite,
-        progress=not args.quiet,
-        tile_m=args.tile_m or None,
-        margin_m=DEFAULT_MARGIN_M if args.margin_m is None else args.margin_m,
-        cluster=cluster,
-    )
+    # The cluster starts first, and its workers load the model while this process imports the
+    # pipeline (seconds of each that would otherwise follow one another).
+    with dask_client(cluster) as client:
+        warming = []  # held, so that Dask keeps the tasks until they have run
+        if client is not None:
+            model_arg = None if args.model is None else str(args.model.resolve())
+            warming = on_every_worker(client, "guardrail_core.process.tile_task:warm_up", model_arg)
+        from guardrail_core.extract.model_folder import DEFAULT_MODEL_DIR, load_model
+        from guardrail_core.process import DEFAULT_MARGIN_M, process_drive_folder
+
+        model_dir = args.model or DEFAULT_MODEL_DIR
+        extraction, reconstruction = common.process_params(args.set or [])
+        model = load_model(model_dir)
+        if args.model is None:
+            print(f"model: the default model shipped with guardrail ({model.version})")
+        info = process_drive_folder(
+            args.drive,
+            model_dir,
+            args.out,
+            params=extraction,
+            reconstruction=reconstruction,
+            overwrite=args.overwrite,
+            progress=not args.quiet,
+            tile_m=args.tile_m or None,
+            margin_m=DEFAULT_MARGIN_M if args.margin_m is None else args.margin_m,
+            cluster=cluster,
+            client=client,
+        )
+        del warming  # their work is done (a warm-up that failed leaves it to the tiles)
     counts = info.counts
     crops = counts.crops
     print(

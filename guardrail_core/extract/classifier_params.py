@@ -14,6 +14,9 @@ CLASS_NAMES = ("other", "guardrail")
 MODES = ("fast", "full")
 #: The network halves its resolution five times: input sizes must be multiples of this.
 SIZE_STEP = 32
+#: The segment head is trained on crop probabilities clipped to [this, 1 - this]; classifying
+#: clips at least as much (``ClassifyParams.crop_probability_clip``).
+TRAINING_CLIP = 1e-5
 
 
 @dataclass(frozen=True)

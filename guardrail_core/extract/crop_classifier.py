@@ -26,7 +26,7 @@ from guardrail_core.extract.backbone import (
     new_network,
     normalise,
 )
-from guardrail_core.extract.classifier_params import CLASS_NAMES, ClassifierParams
+from guardrail_core.extract.classifier_params import CLASS_NAMES, TRAINING_CLIP, ClassifierParams
 from guardrail_core.extract.cnn_runtime import BATCH_SIZE, CropNetwork, chosen_runtime
 from guardrail_core.extract.segment_head import SegmentHead
 from guardrail_core.extract.torch_threads import one_thread
@@ -215,18 +215,22 @@ class GuardrailClassifier:
         proba = network(crops, batch_size=batch_size, progress=progress, desc="classifying crops")
         return proba.astype(np.float64)
 
-    def segment_proba(self, features: np.ndarray, crop_proba: np.ndarray) -> np.ndarray:
+    def segment_proba(
+        self, features: np.ndarray, crop_proba: np.ndarray, crop_clip: float = TRAINING_CLIP
+    ) -> np.ndarray:
         """(S,) float64 P(guardrail) of whole segments.
 
         With a segment head: from the segments' shape and neighbour features (S, F) and their crop
-        probabilities (S,), NaN where a segment has no crop; every segment gets an answer.
-        Without one (a crop classifier alone): the crop probabilities as given, NaN included.
+        probabilities (S,), NaN where a segment has no crop, clipped to [``crop_clip``,
+        1 - ``crop_clip``] (``ClassifyParams.crop_probability_clip``); every segment gets an
+        answer. Without one (a crop classifier alone): the crop probabilities as given, NaN
+        included.
         """
         if self.segment_head is None:
             return np.asarray(crop_proba, np.float64).copy()
-        return self.segment_head.proba(features, crop_proba)
+        return self.segment_head.proba(features, crop_proba, crop_clip)
 
-    def shape_decides(self, features: np.ndarray) -> np.ndarray:
+    def shape_decides(self, features: np.ndarray, crop_clip: float = TRAINING_CLIP) -> np.ndarray:
         """(S,) bool: segments whose label the segment head gives whatever their crop says.
 
         For these the CNN can be skipped: :meth:`segment_proba` with any crop probability in
@@ -239,10 +243,11 @@ class GuardrailClassifier:
         Parameters
         ----------
         features : (S, F) float32 segment features, as for :meth:`segment_proba`
+        crop_clip : the crop probabilities' clip, as for :meth:`segment_proba`
         """
         if self.segment_head is None:
             return np.zeros(len(features), bool)
-        lo, hi = self.segment_head.proba_range(features)
+        lo, hi = self.segment_head.proba_range(features, crop_clip)
         return (hi < self.threshold - DECIDED_MARGIN) | (lo >= self.threshold + DECIDED_MARGIN)
 
     def predict(

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -34,7 +34,7 @@ from guardrail_core.extract.segments import (
 from guardrail_core.extract.shape_features import segment_features
 from guardrail_core.formats.drive import Drive
 from guardrail_core.formats.run_folder import POINT_OFF_ROAD, POINT_ROAD
-from guardrail_core.params import ParameterError, StageParams
+from guardrail_core.params import ParameterError, StageParams, apply_settings
 from guardrail_core.sensors.track import TrackCoordinates, track_coordinates
 from guardrail_core.timing import StageTimer
 
@@ -70,6 +70,11 @@ class ExtractionParams(StageParams):
             name: _STAGES[name].from_json(value) for name, value in data.items()
         }
         return cls(**stages)
+
+    def with_settings(self, settings: Sequence[str]) -> ExtractionParams:
+        """These parameters with ``STAGE.NAME=VALUE`` settings applied (``guardrail process
+        --set``): see :func:`~guardrail_core.params.apply_settings`."""
+        return apply_settings(self, _STAGES, settings, "extraction")
 
 
 #: The stages of :class:`ExtractionParams` by field name.

@@ -16,11 +16,15 @@ import torch
 from torch import nn
 
 from guardrail_core.errors import InvalidOptionError, ModelFormatError
+from guardrail_core.extract.classifier_params import TRAINING_CLIP
 from guardrail_core.extract.torch_threads import one_thread
 from guardrail_core.params import StageParams, param
 
-_LOGIT_CLIP = 1e-5  # crop probabilities are clipped to [eps, 1 - eps] before the logit
-_MAX_LOGIT = float(np.log((1 - _LOGIT_CLIP) / _LOGIT_CLIP))  # so crop logits lie in +-this
+
+def max_logit(clip: float) -> float:
+    """The largest crop logit the head sees when crop probabilities are clipped to ``clip``."""
+    clip = max(float(clip), TRAINING_CLIP)
+    return float(np.log((1 - clip) / clip))
 
 
 @dataclass(frozen=True)
@@ -40,13 +44,17 @@ class SegmentHeadParams(StageParams):
     )
 
 
-def head_inputs(features: np.ndarray, crop_proba: np.ndarray) -> np.ndarray:
+def head_inputs(
+    features: np.ndarray, crop_proba: np.ndarray, clip: float = TRAINING_CLIP
+) -> np.ndarray:
     """(S, F + 2) float32: the features, the crop logit (0 without a crop) and has-crop (0/1).
 
     Parameters
     ----------
     features : (S, F) float32, :func:`~guardrail_core.extract.shape_features.segment_features`
     crop_proba : (S,) float, the crop classifier's P(guardrail); NaN where there is no crop
+    clip : crop probabilities are clipped to [clip, 1 - clip] first (never less than
+        :data:`TRAINING_CLIP`)
     """
     features = np.asarray(features, np.float32)
     crop_proba = np.asarray(crop_proba, np.float64)
@@ -56,7 +64,8 @@ def head_inputs(features: np.ndarray, crop_proba: np.ndarray) -> np.ndarray:
             f"{features.shape} and {crop_proba.shape}"
         )
     has_crop = np.isfinite(crop_proba)
-    p = np.clip(np.where(has_crop, crop_proba, 0.5), _LOGIT_CLIP, 1 - _LOGIT_CLIP)
+    clip = max(float(clip), TRAINING_CLIP)
+    p = np.clip(np.where(has_crop, crop_proba, 0.5), clip, 1 - clip)
     logit = np.log(p / (1 - p))
     return np.concatenate(
         [features, logit[:, None].astype(np.float32), has_crop[:, None].astype(np.float32)],
@@ -87,9 +96,11 @@ class SegmentHead:
     def n_inputs(self) -> int:
         return int(len(self.mean))
 
-    def proba(self, features: np.ndarray, crop_proba: np.ndarray) -> np.ndarray:
+    def proba(
+        self, features: np.ndarray, crop_proba: np.ndarray, clip: float = TRAINING_CLIP
+    ) -> np.ndarray:
         """(S,) float64 P(guardrail) of segments; see :func:`head_inputs` for the inputs."""
-        x = head_inputs(features, crop_proba)
+        x = head_inputs(features, crop_proba, clip)
         if x.shape[1] != self.n_inputs:
             raise InvalidOptionError(
                 f"segment head: expected {self.n_inputs - 2} features per segment, got "
@@ -101,7 +112,9 @@ class SegmentHead:
         with torch.inference_mode(), one_thread():
             return torch.softmax(self._net(z), dim=1)[:, 1].numpy().astype(np.float64)
 
-    def proba_range(self, features: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def proba_range(
+        self, features: np.ndarray, clip: float = TRAINING_CLIP
+    ) -> tuple[np.ndarray, np.ndarray]:
         """The least and the greatest P(guardrail) the head can give each segment with a crop,
         whatever the crop's probability: what the shape alone leaves open.
 
@@ -112,12 +125,14 @@ class SegmentHead:
         Parameters
         ----------
         features : (S, F) float32, as for :meth:`proba`
+        clip : the crop probabilities' clip, as for :meth:`proba`
 
         Returns
         -------
         lo, hi : (S,) float64 in [0, 1], lo <= :meth:`proba` <= hi for every crop probability
         """
         x = head_inputs(features, np.full(len(features), 0.5)).astype(np.float64)
+        top = max_logit(clip)
         if x.shape[1] != self.n_inputs:
             raise InvalidOptionError(
                 f"segment head: expected {self.n_inputs - 2} features per segment, got "
@@ -134,11 +149,11 @@ class SegmentHead:
         slope = w1[:, logit_col] / float(self.scale[logit_col])
         a = z @ w1.T + b1 - float(self.mean[logit_col]) * slope
         with np.errstate(divide="ignore", invalid="ignore"):
-            switch = np.where(slope != 0, -a / slope, -_MAX_LOGIT)  # (S, H)
+            switch = np.where(slope != 0, -a / slope, -top)  # (S, H)
         t = np.concatenate(
             [
-                np.full((len(x), 2), [-_MAX_LOGIT, _MAX_LOGIT]),
-                np.clip(switch, -_MAX_LOGIT, _MAX_LOGIT),
+                np.full((len(x), 2), [-top, top]),
+                np.clip(switch, -top, top),
             ],
             axis=1,
         )  # (S, H + 2) candidate crop logits

@@ -3,9 +3,10 @@ folder, tile by tile.
 
 The drive is cut into processing tiles along the trajectory (:mod:`.tile_plan`); each tile is
 extracted, classified and label-corrected with a margin of its neighbours (:mod:`.tile_task`),
-as a Dask task or here; the parts are joined (:mod:`.stitch`); the guardrail points of all
-tiles are grouped into runs, so a run across a tile edge is one run, and the runs are
-reconstructed, again as tasks. The run folder is written whole or not at all.
+as a Dask task or here; the parts are joined as they end (:mod:`.stitch`); their guardrail
+points are grouped into runs, so a run across a tile edge is one run, and each run is
+reconstructed, again as a task, as soon as no tile still running can add to it
+(:mod:`.run_stream`). The run folder is written whole or not at all.
 """
 
 from __future__ import annotations
@@ -23,7 +24,13 @@ from typing import Any
 
 import numpy as np
 
-from guardrail_core.distributed import ClusterSpec, TaskFailure, dask_client, map_tasks
+from guardrail_core.distributed import (
+    ClusterSpec,
+    LaterTasks,
+    TaskFailure,
+    dask_client,
+    map_tasks,
+)
 from guardrail_core.errors import (
     EmptyDriveError,
     GuardrailError,
@@ -38,14 +45,15 @@ from guardrail_core.formats.drive_tiles import vehicle_station
 from guardrail_core.formats.run_folder import RUN_FORMAT_VERSION, write_run_files
 from guardrail_core.formats.run_folder_paths import RunFolder
 from guardrail_core.formats.run_info import DriveRef, ModelRef, Processing, RunInfo, TileOutcome
+from guardrail_core.process.run_stream import RunStream
 from guardrail_core.process.stitch import PartStitcher
 from guardrail_core.process.tile_plan import ProcessTile, plan_tiles
 from guardrail_core.process.tile_task import TileJob, process_window, run_tile_job
 from guardrail_core.reconstruct.pipeline import (
     Reconstruction,
     ReconstructionParams,
+    RunInput,
     reconstruct_run_meshes,
-    split_runs,
     write_reconstruction,
 )
 from guardrail_core.sensors.track import TrackCoordinates, track_coordinates
@@ -57,6 +65,9 @@ from guardrail_core.sensors.track import TrackCoordinates, track_coordinates
 DEFAULT_MARGIN_M = 10.0
 #: Metres of trajectory per processing tile on the command line.
 DEFAULT_TILE_M = 100.0
+#: Metres a drive tile's recorded bounds are widened by: its points are read back rounded to
+#: the LAS scale (at most a centimetre), and may lie that much outside.
+_BOUNDS_SLACK_M = 0.01
 _PARTS_DIR = ".parts"
 
 
@@ -204,6 +215,7 @@ def process_drive_folder(
         make_job=job,
         tile_points=[t.points for t in source.tiles.tiles],
         reads=[[int(d) for d in source.tiles.touching(*t.window_m)] for t in tiles],
+        tile_boxes=_tile_boxes(source.tiles.tiles, drive.origin),
         params=params,
         reconstruction=reconstruction,
         overwrite=overwrite,
@@ -220,6 +232,16 @@ def _plan(
 ) -> list[ProcessTile]:
     length = float(vehicle_station(drive.trajectory, drive.trajectory.time[-1:])[0])
     return plan_tiles(length, tile_m, margin_m, params.segments.slice_length_m)
+
+
+def _tile_boxes(records: Iterable[Any], origin: np.ndarray) -> np.ndarray:
+    """(D, 4) [x_min, y_min, x_max, y_max] of each drive tile's points, local frame."""
+    boxes = np.array([[*r.bounds_min[:2], *r.bounds_max[:2]] for r in records], np.float64).reshape(
+        -1, 4
+    )
+    shift = np.asarray(origin, np.float64)[:2]
+    slack = np.array([-1, -1, 1, 1]) * _BOUNDS_SLACK_M
+    return boxes - np.concatenate([shift, shift]) + slack
 
 
 def _window_in_memory(
@@ -245,6 +267,7 @@ def _process(
     make_job: Callable[[ProcessTile, Path], TileJob] | None = None,
     tile_points: list[int],
     reads: list[list[int]] | None = None,
+    tile_boxes: np.ndarray | None = None,
     params: ExtractionParams,
     reconstruction: ReconstructionParams | None,
     overwrite: bool,
@@ -258,8 +281,10 @@ def _process(
 ) -> RunInfo:
     """The tiles (``run_here``: each processed here, one after another; ``make_job``: each a
     Dask task on ``client`` or on the cluster of ``processing``), stitched as they end
-    (``reads``: the drive tiles each tile's window reads, see :class:`PartStitcher`), then the
-    reconstruction."""
+    (``reads``: the drive tiles each tile's window reads, see :class:`PartStitcher`), and the
+    reconstruction of each run as soon as it is closed (``tile_boxes``: (D, 4) xy boxes of the
+    drive tiles, where the points still to come lie; without them every run waits for the last
+    tile)."""
     out = Path(out)
     started = time.strftime("%Y-%m-%dT%H:%M:%S%z")
     clock = time.perf_counter() if clock is None else clock
@@ -280,13 +305,44 @@ def _process(
         parts_dir.mkdir()
         part_of = {t.number: parts_dir / f"{t.number:06d}" for t in tiles}
         stitcher = PartStitcher(staging, tile_points, len(tiles), reads)
-
-        def stitch(i: int, result: TileOutcome | TaskFailure) -> None:
-            good = not isinstance(result, TaskFailure) and result.error is None
-            stitcher.add(i, part_of[tiles[i].number] if good else None)
+        stream = None
+        if reconstruction is not None:
+            stream = RunStream(drive.trajectory.position, reconstruction)
+        # The last part that reads each drive tile: its points may come until that one is joined.
+        last_reader = np.full(len(tile_points), len(tiles), np.int64)
+        if reads is not None and tile_boxes is not None:
+            last_reader[:] = -1
+            for k, ids in enumerate(reads):
+                last_reader[ids] = k
 
         with _client(client, cluster) as dask:
             phase("start")
+            later: LaterTasks[RunInput, Any] = LaterTasks(
+                dask,
+                partial(reconstruct_run_meshes, params=reconstruction or ReconstructionParams()),
+            )
+            reconstruct_start: float | None = None
+
+            def start_runs(runs: list[RunInput]) -> None:
+                nonlocal reconstruct_start
+                if runs and reconstruct_start is None:
+                    reconstruct_start = time.perf_counter()
+                for run in sorted(runs, key=lambda r: -len(r.xyz)):  # longest first
+                    later.start(run)
+
+            def stitch(i: int, result: TileOutcome | TaskFailure) -> None:
+                good = not isinstance(result, TaskFailure) and result.error is None
+                joined = stitcher.add(i, part_of[tiles[i].number] if good else None)
+                if stream is None:
+                    return
+                for part in joined:
+                    with np.load(part / "guardrail.npz", allow_pickle=False) as data:
+                        stream.add(
+                            data["index"], data["xyz"], data["ground_index"], data["ground_xyz"]
+                        )
+                if tile_boxes is not None and stitcher.joined < len(tiles):
+                    start_runs(stream.close(tile_boxes[last_reader >= stitcher.joined]))
+
             results: list[Any]
             if run_here is not None:
                 results = map_tasks(
@@ -319,6 +375,10 @@ def _process(
                     f"{drive.root}: every tile failed: "
                     + "; ".join(f"tile {o.number}: {o.error}" for o in outcomes)
                 )
+            if stream is not None:
+                # The runs still open go to the workers first, so that they are reconstructed
+                # while the run's tables are written here.
+                start_runs(stream.close())
             stitched = stitcher.finish()
             image_files = [record.file for record in drive.images]
             info = RunInfo(
@@ -347,35 +407,19 @@ def _process(
             )
             phase("stitch")
             if reconstruction is not None:
-                start = time.perf_counter()
-                runs = split_runs(
-                    stitched.guardrail_xyz,
-                    stitched.ground_xyz,
-                    drive.trajectory.position,
-                    reconstruction,
-                )
-                # Longest runs first, so that no long run is left alone at the end.
-                order = sorted(range(len(runs)), key=lambda r: -len(runs[r].xyz))
-                done_runs = map_tasks(
-                    dask,
-                    partial(reconstruct_run_meshes, params=reconstruction),
-                    [runs[r] for r in order],
-                    desc="reconstruct",
-                    unit="run",
-                    progress=progress,
-                    scatter=True,
-                )
-                results_runs: list[Any] = [None] * len(runs)
-                for r, result in zip(order, done_runs, strict=True):
-                    results_runs[r] = result
-                models = []
-                for r in results_runs:
-                    if isinstance(r, TaskFailure):
+                assert stream is not None
+                done_runs = later.results(desc="reconstruct", unit="run", progress=progress)
+                final_id = stream.final_ids()
+                models: list[Any] = [None] * len(done_runs)
+                for run, result in zip(later.items, done_runs, strict=True):
+                    final = int(final_id[run.run_id])  # the stream's numbers are provisional
+                    if isinstance(result, TaskFailure):
                         raise ReconstructionError(
-                            f"reconstructing run {r.item.run_id} failed: {r.error}"
+                            f"reconstructing run {final} failed: {result.error}"
                         )
-                    models.append(r)
-                seconds = round(time.perf_counter() - start, 4)
+                    model_, superimposed, mesh = result
+                    models[final] = (dataclasses.replace(model_, run_id=final), superimposed, mesh)
+                seconds = round(time.perf_counter() - (reconstruct_start or time.perf_counter()), 4)
                 summary = write_reconstruction(
                     RunFolder(staging).reconstruction.root,
                     Reconstruction(
@@ -390,7 +434,7 @@ def _process(
                 )
                 timings["stages"]["reconstruct"] = {
                     "seconds": seconds,
-                    "points": len(stitched.guardrail_xyz),
+                    "points": stream.points_added,
                 }
                 info = dataclasses.replace(info, reconstruction=summary)
                 phase("reconstruct")

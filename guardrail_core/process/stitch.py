@@ -1,9 +1,9 @@
 """Join the parts of the processing tiles into one run folder, as the tiles end.
 
 Segments get drive-wide numbers (tile by tile, in each tile's order), crops are renamed to
-them, the points' segments are written per drive tile (``points/DDDDDD.npz``), and the
-guardrail points of all tiles are gathered in drive order for the reconstruction, which merges
-runs that cross tile edges (:func:`guardrail_core.reconstruct.pipeline.split_runs`).
+them, and the points' segments are written per drive tile (``points/DDDDDD.npz``). Each
+part's guardrail points go to the reconstruction's :class:`~.run_stream.RunStream` as it is
+joined (:meth:`PartStitcher.add` says which parts were).
 """
 
 from __future__ import annotations
@@ -41,7 +41,7 @@ _COUNT_KEYS = (
 
 @dataclass
 class Stitched:
-    """The joined run: its segment table, counts and timings, and what the reconstruction needs.
+    """The joined run: its segment table, counts and timings.
 
     Attributes
     ----------
@@ -49,16 +49,12 @@ class Stitched:
     embeddings : (S, 1280) float16, or None
     counts : the run's counts (points of failed tiles are in ``points`` only)
     stages : per stage, seconds summed over the tiles and points
-    guardrail_xyz : (G, 3) float64 guardrail points in drive order
-    ground_xyz : (R, 3) float64 road points near them, in drive order
     """
 
     segments: dict[str, np.ndarray]
     embeddings: np.ndarray | None
     counts: RunCounts
     stages: dict[str, dict[str, float]]
-    guardrail_xyz: np.ndarray
-    ground_xyz: np.ndarray
 
 
 class PartStitcher:
@@ -102,25 +98,32 @@ class PartStitcher:
         self._totals: dict[str, int] = dict.fromkeys(_COUNT_KEYS, 0)
         self._crops = {"ok": 0, "no_image": 0, "too_small": 0, "asked": 0}
         self._stages: dict[str, dict[str, float]] = {}
-        self._guardrail: list[tuple[np.ndarray, np.ndarray]] = []
-        self._ground: list[tuple[np.ndarray, np.ndarray]] = []
         self._offset = 0
         self._component_offset = 0
         (self.staging / "crops").mkdir(exist_ok=True)
 
-    def add(self, k: int, part: Path | None) -> None:
-        """Part ``k`` has ended (None: it failed); join what can be joined."""
+    @property
+    def joined(self) -> int:
+        """Parts joined so far: parts 0 .. ``joined`` - 1."""
+        return self._next
+
+    def add(self, k: int, part: Path | None) -> list[Path]:
+        """Part ``k`` has ended (None: it failed); join what can be joined, and return the
+        parts joined now, in order (those that did not fail)."""
         self._arrived[k] = part
+        done = []
         while self._next in self._arrived:
             joined = self._arrived.pop(self._next)
             if joined is not None:
                 self._join(joined)
+                done.append(joined)
             if self.reads is not None:
                 for d in self.reads[self._next]:
                     self._waiting[d] -= 1
                     if self._waiting[d] == 0:
                         self._write_points(d)
             self._next += 1
+        return done
 
     def finish(self) -> Stitched:
         """The joined run, once every part has been added."""
@@ -149,8 +152,6 @@ class PartStitcher:
             else None,
             counts=counts,
             stages=self._stages,
-            guardrail_xyz=_in_drive_order(self._guardrail),
-            ground_xyz=_in_drive_order(self._ground),
         )
 
     def _join(self, part: Path) -> None:
@@ -179,9 +180,6 @@ class PartStitcher:
                 self._has_embeddings = False
         for piece in sorted((part / "points").glob("*.npz")):
             self._pieces[int(piece.stem)].append((piece, self._offset))
-        with np.load(part / "guardrail.npz", allow_pickle=False) as data:
-            self._guardrail.append((data["index"], data["xyz"]))
-            self._ground.append((data["ground_index"], data["ground_xyz"]))
         self._offset += n
 
     def _write_points(self, d: int) -> None:
@@ -194,15 +192,6 @@ class PartStitcher:
                 segment[data["index"]] = np.where(local >= 0, local + first, local)
         write_point_tile(self.staging, d, segment)
         self._written[d] = True
-
-
-def _in_drive_order(pieces: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
-    """(K, 3) float64: points of all parts sorted by their drive-wide index."""
-    if not pieces:
-        return np.zeros((0, 3))
-    index = np.concatenate([i for i, _ in pieces])
-    xyz = np.concatenate([x for _, x in pieces]).reshape(-1, 3)
-    return xyz[np.argsort(index, kind="stable")]
 
 
 def _concatenate(tables: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:

@@ -119,6 +119,17 @@ def run_tile_job(job: TileJob) -> TileOutcome:
         )
 
 
+def warm_up(model: str | None) -> None:
+    """Load on a worker what its tiles and runs will need (a Dask task sent to each worker as
+    the cluster starts, while the command still starts up): the model folder ``model`` (None:
+    the default model), the CNN's runtime session, and the reconstruction's modules."""
+    import guardrail_core.reconstruct.pipeline  # noqa: F401  (open3d, trimesh)
+    from guardrail_core.extract.model_folder import DEFAULT_MODEL_DIR
+
+    classifier = _load_model(str(Path(model or DEFAULT_MODEL_DIR).resolve()))
+    classifier.embed(np.zeros((1, classifier.input_size, classifier.input_size, 3), np.uint8))
+
+
 @functools.lru_cache(maxsize=2)
 def _open_source(path: str) -> DriveSource:
     return open_drive(path, with_truth=False)

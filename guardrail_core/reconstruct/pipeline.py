@@ -44,7 +44,7 @@ from guardrail_core.formats.reconstruction_folder import (
 from guardrail_core.formats.run_folder_paths import RunFolder
 from guardrail_core.formats.run_info import ReconstructionSummary
 from guardrail_core.io.meshes import export_mesh_files, write_meshes
-from guardrail_core.params import ParameterError, StageParams
+from guardrail_core.params import ParameterError, StageParams, apply_settings
 from guardrail_core.reconstruct.assemble import run_mesh
 from guardrail_core.reconstruct.beams import BeamParams, reconstruct_beam, unit_type
 from guardrail_core.reconstruct.inventory import (
@@ -117,82 +117,9 @@ class ReconstructionParams(StageParams):
         return cls(**parts)
 
     def with_settings(self, settings: Sequence[str]) -> ReconstructionParams:
-        """These parameters with ``STAGE.NAME=VALUE`` settings applied (the CLI's ``--set``).
-
-        NAME is a field of the stage's parameters (or a name of an earlier version); VALUE is
-        read as the field's type: an integer, a number, ``true``/``false``, text, or JSON for a
-        tuple. Each stage is checked once, after all its settings, so their order does not
-        matter.
-
-        Raises
-        ------
-        ParameterError
-            A setting not of that form, an unknown stage or name, or a value of the wrong type
-            or out of range; the message names ``STAGE.NAME``.
-        """
-        stages = self.stage_classes()
-        changes: dict[str, dict[str, Any]] = {}
-        for setting in settings:
-            key, sep, text = setting.partition("=")
-            stage, dot, name = key.strip().partition(".")
-            if not sep or not dot:
-                raise ParameterError(f"expected STAGE.NAME=VALUE, got {setting!r}")
-            if stage not in stages:
-                raise ParameterError(
-                    f"unknown reconstruction stage {stage!r} in {setting!r} "
-                    f"(known: {', '.join(stages)})"
-                )
-            kind = stages[stage]
-            name = kind.renamed.get(name, name)
-            hints = typing.get_type_hints(kind)
-            names = [f.name for f in dataclasses.fields(kind)]
-            if name not in names:
-                raise ParameterError(
-                    f"unknown reconstruction parameter {stage}.{name} (known: {', '.join(names)})"
-                )
-            value = _setting_value(f"{stage}.{name}", hints[name], text.strip())
-            changes.setdefault(stage, {})[name] = value
-        parts = {}
-        for stage, values in changes.items():
-            try:
-                parts[stage] = dataclasses.replace(getattr(self, stage), **values)
-            except ParameterError as exc:
-                raise ParameterError(f"{stage}: {exc}") from exc
-        return dataclasses.replace(self, **parts)
-
-
-#: How each type of parameter is read from text, for the error that names what was expected.
-_KIND_WORDS = {bool: "true or false", int: "an integer", float: "a number"}
-
-
-def _setting_value(where: str, kind: Any, text: str) -> Any:
-    """The text of a ``--set`` value as the parameter's type ``kind`` (its annotation).
-
-    Raises
-    ------
-    ParameterError
-        ``text`` is not a value of that type; names ``where`` (``STAGE.NAME``).
-    """
-    try:
-        if kind is bool:
-            word = text.lower()
-            if word not in ("true", "false"):
-                raise ValueError(text)
-            return word == "true"
-        if kind is int:
-            try:
-                return int(text)
-            except ValueError:
-                return float(text)  # 16.0 reads as 16; the stage refuses 16.5 by name
-        if kind is float:
-            return float(text)
-        if kind is str:
-            return text
-        value = json.loads(text)  # a tuple (colours) as a JSON list
-        return tuple(value) if isinstance(value, list) else value
-    except ValueError as exc:
-        what = _KIND_WORDS.get(kind, "a JSON value")
-        raise ParameterError(f"{where} must be {what}, got {text!r}") from exc
+        """These parameters with ``STAGE.NAME=VALUE`` settings applied (the CLI's ``--set``):
+        see :func:`~guardrail_core.params.apply_settings`."""
+        return apply_settings(self, self.stage_classes(), settings, "reconstruction")
 
 
 @dataclass
@@ -399,8 +326,29 @@ def split_runs(
         raise ReconstructionError(f"points must be (N, 3), got {points.shape}")
     if not np.isfinite(points).all():
         raise ReconstructionError("guardrail points contain NaN or infinity")
+    return run_inputs(points, group_runs(points, params.runs), ground_xyz, trajectory, params)
+
+
+def run_inputs(
+    points: np.ndarray,
+    run_of_point: np.ndarray,
+    ground_xyz: np.ndarray,
+    trajectory: np.ndarray,
+    params: ReconstructionParams = ReconstructionParams(),
+    first_id: int = 0,
+) -> list[RunInput]:
+    """The :class:`RunInput` of each run of grouped guardrail points.
+
+    Parameters
+    ----------
+    points : (N, 3) float64, metres: guardrail points, in drive order
+    run_of_point : (N,) int: each point's run, 0 .. R-1 (-1: in none)
+    ground_xyz : (G, 3) float64: road-surface points (at least those within
+        ``params.runs.ground_reach_m`` of the runs' points), in drive order
+    trajectory : (T, 3) float64: the vehicle's positions
+    first_id : the ``run_id`` of run 0 (the others follow)
+    """
     ground_xyz = np.asarray(ground_xyz, np.float64).reshape(-1, 3)
-    run_of_point = group_runs(points, params.runs)
     n_runs = int(run_of_point.max()) + 1 if len(run_of_point) else 0
     ground_tree = cKDTree(ground_xyz[:, :2]) if len(ground_xyz) else None
     track = np.asarray(trajectory, np.float64)[:, :2]
@@ -417,7 +365,7 @@ def split_runs(
         centre = run_xyz.mean(axis=0)
         toward = np.zeros(3)
         toward[:2] = track[track_tree.query(centre[:2])[1]] - centre[:2]
-        runs.append(RunInput(r, run_xyz, near_ground, toward))
+        runs.append(RunInput(first_id + r, run_xyz, near_ground, toward))
     return runs
 
 

@@ -106,9 +106,30 @@ def group_runs(xyz: np.ndarray, params: RunParams = RunParams()) -> np.ndarray:
     out = np.full(n, -1, np.int32)
     if n == 0:
         return out
-    # Voxel-downsample: connectivity of occupied voxels (centroids) instead of points.
+    comp, n_comp = link_components(xyz, params)
+    keep = is_run(xyz, comp, n_comp, params)
+    # Deterministic numbering: by the first point index of each kept component.
+    first = np.full(n_comp, n, np.int64)
+    np.minimum.at(first, comp, np.arange(n))
+    kept = np.flatnonzero(keep)
+    new_id = np.full(n_comp, -1, np.int32)
+    new_id[kept[np.argsort(first[kept], kind="stable")]] = np.arange(len(kept), dtype=np.int32)
+    out[:] = new_id[comp]
+    return out
+
+
+def link_components(xyz: np.ndarray, params: RunParams = RunParams()) -> tuple[np.ndarray, int]:
+    """The connected components of guardrail points (N, 3) within ``link_distance_m``: (N,)
+    int64 component of each point, and their number.
+
+    Points are linked through the centroids of the voxels they occupy; the voxels are cells of a
+    grid fixed in the frame (not anchored at the points), so a point's voxel, and with it the
+    components, do not depend on which other points are given: guardrail points gathered tile
+    by tile (:class:`guardrail_core.process.run_stream.RunStream`) link as those of a whole drive.
+    """
     voxel = params.link_distance_m / params.voxels_per_link
-    cell = np.floor((xyz - xyz.min(axis=0)) / voxel).astype(np.int64)
+    cell = np.floor(xyz / voxel).astype(np.int64)
+    cell -= cell.min(axis=0)
     dims = cell.max(axis=0) + 1
     key = (cell[:, 0] * dims[1] + cell[:, 1]) * dims[2] + cell[:, 2]
     _, voxel_of_point, counts = np.unique(key, return_inverse=True, return_counts=True)
@@ -120,21 +141,25 @@ def group_runs(xyz: np.ndarray, params: RunParams = RunParams()) -> np.ndarray:
     graph = coo_matrix(
         (np.ones(len(pairs), np.int8), (pairs[:, 0], pairs[:, 1])), shape=(n_vox, n_vox)
     )
-    _, comp_of_voxel = connected_components(graph, directed=False)
-    comp = comp_of_voxel[voxel_of_point]
-    n_comp = int(comp.max()) + 1
+    n_comp, comp_of_voxel = connected_components(graph, directed=False)
+    return comp_of_voxel[voxel_of_point].astype(np.int64), int(n_comp)
+
+
+def link_reach_m(params: RunParams = RunParams()) -> float:
+    """Metres: no point farther than this from every point of a component can change it (join
+    it, or move the centroid of a voxel it is linked through): the link distance and two voxel
+    diagonals."""
+    voxel = params.link_distance_m / params.voxels_per_link
+    return params.link_distance_m + 2 * float(np.sqrt(3.0)) * voxel
+
+
+def is_run(xyz: np.ndarray, comp: np.ndarray, n_comp: int, params: RunParams) -> np.ndarray:
+    """(C,) bool: the components (of :func:`link_components`) with at least ``min_points``
+    points and ``min_length_m`` of horizontal length."""
     size = np.bincount(comp, minlength=n_comp)
     # Horizontal length: the xy extent along each component's principal direction.
     length = _horizontal_length(xyz[:, :2], comp, n_comp)
-    keep = (size >= params.min_points) & (length >= params.min_length_m)
-    # Deterministic numbering: by the first point index of each kept component.
-    first = np.full(n_comp, n, np.int64)
-    np.minimum.at(first, comp, np.arange(n))
-    kept = np.flatnonzero(keep)
-    new_id = np.full(n_comp, -1, np.int32)
-    new_id[kept[np.argsort(first[kept], kind="stable")]] = np.arange(len(kept), dtype=np.int32)
-    out[:] = new_id[comp]
-    return out
+    return (size >= params.min_points) & (length >= params.min_length_m)
 
 
 def _horizontal_length(xy: np.ndarray, label: np.ndarray, n_label: int) -> np.ndarray:

@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from guardrail_core.errors import InvalidOptionError, TrainingDataError
+from guardrail_core.extract.classifier_params import TRAINING_CLIP
 from guardrail_core.extract.classify import (
     ClassifierParams,
     GuardrailClassifier,
@@ -395,7 +396,8 @@ def predict_run(
     """
     segments = run.segments
     has_crop = segments["crop_status"] == CROP_OK
-    asked = crops_to_ask(model, segments["features"], has_crop, _run_classify(run))
+    classify = _run_classify(run)
+    asked = crops_to_ask(model, segments["features"], has_crop, classify)
     rows = np.flatnonzero(asked)
     crop_probability = np.full(len(run), np.nan, np.float64)
     if len(rows):
@@ -406,7 +408,9 @@ def predict_run(
             crop_probability[rows] = model.predict_proba(embeddings=stored[rows].astype(np.float32))
         else:
             crop_probability[rows] = model.predict_proba(read_crops(run, rows, model.input_size))
-    probability, raw_label = fuse_scores(model, segments["features"], has_crop, crop_probability)
+    probability, raw_label = fuse_scores(
+        model, segments["features"], has_crop, crop_probability, classify.crop_probability_clip
+    )
     if correction is None:
         correction = _run_correction(run)
     extents = SegmentExtents(segments["slice_index"], segments["lateral"], segments["height"])
@@ -530,11 +534,13 @@ def _current_raw_labels(run: Run) -> np.ndarray:
 
 
 def _run_classify(run: Run) -> ClassifyParams:
-    """The run's own classify parameters; a run from before shape-first asked every crop."""
+    """The run's own classify parameters; a run from before shape-first asked every crop, and
+    one from before the crop probability clip gave the head the crops' probabilities as they
+    came."""
     stored = run.info.params.get("classify")
     if stored is None:
-        return ClassifyParams(shape_first=False)
-    return ClassifyParams.from_json(stored)
+        return ClassifyParams(shape_first=False, crop_probability_clip=TRAINING_CLIP)
+    return ClassifyParams.from_json({"crop_probability_clip": TRAINING_CLIP, **stored})
 
 
 def _run_correction(run: Run) -> CorrectionParams:
