@@ -120,6 +120,12 @@ def test_the_proba_range_holds_every_crop_probability_and_is_reached() -> None:
         head.proba_range(features[:, :2])
 
 
+def typical_features(head: SegmentHead, n: int, rng: np.random.Generator) -> np.ndarray:
+    """(n, F) float32 segment features drawn around the head's standardisation."""
+    k = head.n_inputs - 2
+    return (head.mean[:k] + head.scale[:k] * rng.normal(size=(n, k))).astype(np.float32)
+
+
 @pytest.mark.parametrize("clip", [1e-5, 0.01, 0.2])
 def test_where_the_shape_decides_every_crop_gives_the_same_label(clip: float) -> None:
     """Exact at every clip of the crop probabilities (ClassifyParams.crop_probability_clip)."""
@@ -127,10 +133,7 @@ def test_where_the_shape_decides_every_crop_gives_the_same_label(clip: float) ->
     head = model.segment_head
     assert head is not None
     rng = np.random.default_rng(3)
-    n_features = head.n_inputs - 2
-    features = (
-        head.mean[:n_features] + head.scale[:n_features] * rng.normal(size=(500, n_features))
-    ).astype(np.float32)
+    features = typical_features(head, 500, rng)
     decided = model.shape_decides(features, clip)
     assert 0.1 < decided.mean() < 0.99  # some segments left to the crop at every clip
     n = len(features)
@@ -153,13 +156,8 @@ def test_where_the_shape_decides_every_crop_gives_the_same_label(clip: float) ->
 def test_a_wider_clip_leaves_the_shape_more_to_decide() -> None:
     """The shape decides more segments the less a crop may say (what makes the CNN cheaper)."""
     model = load_model(DEFAULT_MODEL_DIR)
-    head = model.segment_head
-    assert head is not None
-    rng = np.random.default_rng(4)
-    n_features = head.n_inputs - 2
-    features = (
-        head.mean[:n_features] + head.scale[:n_features] * rng.normal(size=(2000, n_features))
-    ).astype(np.float32)
+    assert model.segment_head is not None
+    features = typical_features(model.segment_head, 2000, np.random.default_rng(4))
     decided = [model.shape_decides(features, clip) for clip in (1e-5, 1e-3, 0.01, 0.1, 0.3)]
     for narrow, wide in itertools.pairwise(decided):
         assert np.all(wide[narrow])  # what the shape decided, it still decides

@@ -88,8 +88,12 @@ def run(args: argparse.Namespace) -> int:
     workers = default_workers() if args.workers is None else args.workers
     cluster = ClusterSpec(workers=workers, scheduler=args.scheduler, memory_limit=args.memory_limit)
     # The cluster starts first, and its workers load the model while this process imports the
-    # pipeline (seconds of each that would otherwise follow one another).
-    with dask_client(cluster) as client:
+    # pipeline (seconds of each that would otherwise follow one another); unless the drive or
+    # the model folder is plainly missing, which is said at once instead.
+    plain = Path(args.drive, "drive.json").is_file() and (
+        args.model is None or Path(args.model, "model.json").is_file()
+    )
+    with dask_client(cluster if plain else ClusterSpec()) as client:
         warming = []  # held, so that Dask keeps the tasks until they have run
         if client is not None:
             model_arg = None if args.model is None else str(args.model.resolve())
