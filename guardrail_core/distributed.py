@@ -28,6 +28,7 @@ from guardrail_core.errors import InvalidOptionError
 
 #: The Dask setting behind the environment variable its nanny sets in every worker it spawns.
 _TRIM_ENV = "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_"
+_PROFILE = "distributed.worker.profile.enabled"
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -101,8 +102,10 @@ def dask_client(spec: ClusterSpec) -> Iterator[Any]:
     # Dask's nanny sets MALLOC_TRIM_THRESHOLD_=64 KiB in its workers by default, which also
     # switches off glibc's adaptive mmap threshold: every array over 128 KiB is then mapped and
     # faulted in afresh, and a tile took about 30 % longer (benchmarks/bench_scale.py).
-    # glibc's own defaults keep the freed arrays of one stage for the next.
-    with dask.config.set({_TRIM_ENV: None}):
+    # glibc's own defaults keep the freed arrays of one stage for the next. Dask's statistical
+    # profiler samples every worker's stack 100 times a second, for the dashboard's profile
+    # page only: about 1 % of a worker's CPU that the tiles need more.
+    with dask.config.set({_TRIM_ENV: None, _PROFILE: False}):
         cluster = LocalCluster(
             n_workers=spec.workers,
             threads_per_worker=1,

@@ -155,6 +155,12 @@ def test_parts_stitched_as_they_end_in_any_order_give_the_same_run(
     for name, column in RunFolder.open(out).segments().items():
         np.testing.assert_array_equal(column, in_order.segments()[name], err_msg=name)
     assert np.array_equal(RunFolder.open(out).point_segment(), in_order.point_segment())
+    # The embeddings are appended part by part to the run's file, and nothing else is left.
+    embeddings = RunFolder.open(out).embeddings()
+    assert embeddings is not None and embeddings.shape == (info.counts.segments, 1280)
+    assert np.array_equal(embeddings, in_order.embeddings(), equal_nan=True)
+    assert np.isfinite(embeddings).all(axis=1).sum() >= info.counts.crops.asked
+    assert sorted(p.name for p in out.iterdir()) == sorted(p.name for p in tiled_run.iterdir())
     # Nothing could be joined before tile 0 ended, last; then every drive tile was written.
     tiles = len(info.processing.tiles) if info.processing else 0
     assert events[:tiles] == [f"end {i}" for i in reversed(range(tiles))]

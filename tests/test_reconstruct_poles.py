@@ -11,6 +11,7 @@ import pytest
 from guardrail_core.errors import ReconstructionError
 from guardrail_core.params import ParameterError
 from guardrail_core.reconstruct.poles import PoleParams, detect_poles, fit_circles
+from guardrail_core.reconstruct.poles.ground import ground_height, ground_tree
 from tests.reconstruct_fixtures import make_run
 
 DATA = Path(__file__).parent / "data"
@@ -257,3 +258,19 @@ def test_an_axis_beside_a_pole_is_that_pole():
     assert xy_err.max() < POSITION_TOL
     near = PoleParams(merge_distance_m=0.1)
     assert len(detect_poles(xyz, run.ground, near).poles) == len(run.poles) + 1
+
+
+def test_the_ground_at_an_axis_leaves_out_the_points_closer_than_the_footprint():
+    # Ground points just inside the widest pole's footprint are its foot (z 1 m here), those
+    # just outside are the ground (z 0); the same with the run's search tree built once.
+    params = PoleParams()
+    foot = params.max_radius_m + params.member_margin_m
+    angle = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    ring = np.stack([np.cos(angle), np.sin(angle)], axis=1)
+    inside = np.column_stack([ring * (foot - 1e-6), np.ones(40)])
+    outside = np.column_stack([ring * (foot + 1e-6), np.zeros(40)])
+    ground = np.vstack([inside, outside])
+    centre, low = np.zeros((1, 2)), np.array([0.5])
+    for tree in (None, ground_tree(ground)):
+        base, position = ground_height(centre, low, ground, np.zeros((0, 3)), params, tree)
+        assert base[0] == 0.0 and position[0] == 0.0

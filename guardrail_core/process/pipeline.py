@@ -403,7 +403,6 @@ def _process(
                 segments=stitched.segments,
                 timings=timings,
                 image_files=image_files,
-                embeddings=stitched.embeddings,
             )
             phase("stitch")
             if reconstruction is not None:

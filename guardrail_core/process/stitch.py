@@ -1,7 +1,9 @@
 """Join the parts of the processing tiles into one run folder, as the tiles end.
 
 Segments get drive-wide numbers (tile by tile, in each tile's order), crops are renamed to
-them, and the points' segments are written per drive tile (``points/DDDDDD.npz``). Each
+them, the points' segments are written per drive tile (``points/DDDDDD.npz``) and the crops'
+embeddings are appended to the run's ``embeddings.npy`` as each part is joined, so that this
+process holds neither (a 3 km drive has 165 MB of embeddings; a survey day some GB). Each
 part's guardrail points go to the reconstruction's :class:`~.run_stream.RunStream` as it is
 joined (:meth:`PartStitcher.add` says which parts were).
 """
@@ -23,6 +25,7 @@ from guardrail_core.formats.run_folder import (
     crop_name,
     write_point_tile,
 )
+from guardrail_core.formats.run_folder_paths import RunFolder
 from guardrail_core.formats.run_info import CropCounts, RunCounts
 from guardrail_core.process.tile_task import PART_FILE
 
@@ -39,20 +42,26 @@ _COUNT_KEYS = (
 )
 
 
+#: Where the embeddings' rows gather before their count, and so ``embeddings.npy``'s header, is
+#: known (in the staging folder; gone when the stitcher finishes).
+_EMBEDDING_ROWS = ".embeddings.rows"
+#: Rows copied at a time into ``embeddings.npy`` (2.6 MB of float16 rows).
+_COPY_ROWS = 1024
+
+
 @dataclass
 class Stitched:
-    """The joined run: its segment table, counts and timings.
+    """The joined run: its segment table, counts and timings (its crops, point tiles and
+    embeddings are in the staging folder).
 
     Attributes
     ----------
     segments : SEGMENT_FIELDS arrays, S rows
-    embeddings : (S, 1280) float16, or None
     counts : the run's counts (points of failed tiles are in ``points`` only)
     stages : per stage, seconds summed over the tiles and points
     """
 
     segments: dict[str, np.ndarray]
-    embeddings: np.ndarray | None
     counts: RunCounts
     stages: dict[str, dict[str, float]]
 
@@ -92,7 +101,8 @@ class PartStitcher:
                 self._waiting[d] += 1
         self._written = [False] * len(tile_points)
         self._tables: list[dict[str, np.ndarray]] = []
-        self._embeddings: list[np.ndarray] = []
+        self._embedding_rows = self.staging / _EMBEDDING_ROWS
+        self._embedding_width: int | None = None
         self._has_embeddings = True
         self._pieces: dict[int, list[tuple[Path, int]]] = defaultdict(list)
         self._totals: dict[str, int] = dict.fromkeys(_COUNT_KEYS, 0)
@@ -144,12 +154,12 @@ class PartStitcher:
             guardrail_segments=totals["guardrail_segments"],
             guardrail_points=totals["guardrail_points"],
         )
+        # As for a whole drive: embeddings where a fast model embedded at least one crop.
+        if self._has_embeddings and crops["ok"] and self._embedding_width is not None:
+            self._write_embeddings(totals["segments"], self._embedding_width)
+        self._embedding_rows.unlink(missing_ok=True)
         return Stitched(
             segments=_concatenate(self._tables),
-            # As for a whole drive: embeddings where a fast model embedded at least one crop.
-            embeddings=np.concatenate(self._embeddings)
-            if self._has_embeddings and crops["ok"]
-            else None,
             counts=counts,
             stages=self._stages,
         )
@@ -172,15 +182,45 @@ class PartStitcher:
             table["component"] = table["component"] + self._component_offset
             self._component_offset = int(table["component"].max()) + 1
             self._tables.append(table)
-            for crop in sorted((part / "crops").iterdir()):
-                os.replace(crop, self.staging / crop_name(self._offset + int(crop.stem)))
+            # Strings, not Paths, in any order: a 3 km drive moves some 57,000 crops.
+            staging = str(self.staging)
+            with os.scandir(part / "crops") as crops:
+                for crop in crops:
+                    number = self._offset + int(crop.name.removesuffix(".jpg"))
+                    os.replace(crop.path, f"{staging}/{crop_name(number)}")
             if (part / "embeddings.npy").is_file():
-                self._embeddings.append(np.load(part / "embeddings.npy"))
+                if self._has_embeddings:
+                    self._add_embeddings(np.load(part / "embeddings.npy"), n)
             else:
                 self._has_embeddings = False
         for piece in sorted((part / "points").glob("*.npz")):
             self._pieces[int(piece.stem)].append((piece, self._offset))
         self._offset += n
+
+    def _add_embeddings(self, rows: np.ndarray, n: int) -> None:
+        """Append a part's (n, E) embeddings to the rows gathered so far."""
+        width = self._embedding_width if self._embedding_width is not None else rows.shape[-1]
+        if rows.shape != (n, width):
+            raise ValueError(
+                f"stitching: a part's embeddings are {rows.shape}, expected {(n, width)}"
+            )
+        self._embedding_width = width
+        with open(self._embedding_rows, "ab") as out:
+            out.write(np.ascontiguousarray(rows, np.float16).tobytes())
+
+    def _write_embeddings(self, n: int, width: int) -> None:
+        """``embeddings.npy``, (n, width) float16, from the rows gathered, a slice at a time."""
+        target = np.lib.format.open_memmap(
+            RunFolder(self.staging).embeddings_file, mode="w+", dtype=np.float16, shape=(n, width)
+        )
+        with open(self._embedding_rows, "rb") as rows:
+            for start in range(0, n, _COPY_ROWS):
+                stop = min(start + _COPY_ROWS, n)
+                target[start:stop] = np.frombuffer(
+                    rows.read((stop - start) * width * 2), np.float16
+                ).reshape(stop - start, width)
+        target.flush()
+        del target
 
     def _write_points(self, d: int) -> None:
         """Drive tile ``d``'s point segments from the pieces of the parts (drive-wide segment

@@ -23,7 +23,12 @@ from scipy.spatial import cKDTree
 
 from guardrail_core.reconstruct.model import Pole
 from guardrail_core.reconstruct.poles.circles import fit_circles, fit_shared_radius, ransac_circle
-from guardrail_core.reconstruct.poles.ground import foot_bottom, ground_height, grounded_bottom
+from guardrail_core.reconstruct.poles.ground import (
+    foot_bottom,
+    ground_height,
+    ground_tree,
+    grounded_bottom,
+)
 from guardrail_core.reconstruct.poles.params import PoleParams
 from guardrail_core.reconstruct.poles.stacks import in_line, section_clusters, stack_clusters
 from guardrail_core.reconstruct.runs import check_points
@@ -128,9 +133,10 @@ def detect_poles(
     in_stack = stack >= 0
     z_min = np.full(n_stack, np.inf)
     np.minimum.at(z_min, stack[in_stack], xyz[in_stack, 2])
-    ground_z, _ = ground_height(stack_centre, z_min, ground, xyz, params)
+    tree = ground_tree(ground)
+    ground_z, _ = ground_height(stack_centre, z_min, ground, xyz, params, tree)
     reach = np.full(n_stack, params.max_radius_m + params.member_margin_m)
-    z_min = foot_bottom(stack_centre, reach, z_min, ground, params.foot_gap_m)
+    z_min = foot_bottom(stack_centre, reach, z_min, ground, params.foot_gap_m, tree)
     n_pts = np.bincount(stack[in_stack], minlength=n_stack)
     maybe = (z_min - ground_z <= params.max_base_height_m) & (n_pts >= params.min_points)
 
@@ -147,7 +153,7 @@ def detect_poles(
     found = _fit_stacks(xyz, stack_pts, judge, section, params, rng)
     if not found:
         return none
-    measured = _measure(xyz, section, ground, found, params)
+    measured = _measure(xyz, section, ground, tree, found, params)
     if params.shared_radius and measured.accept.any():
         # Poles of one run share a design: every stack is fitted again with the radius that
         # fits the accepted poles on the run's line together (a delineator off it is another
@@ -163,7 +169,7 @@ def detect_poles(
         found = _fit_stacks(xyz, stack_pts, judge, section, params, rng, shared)
         if not found:
             return none
-        measured = _measure(xyz, section, ground, found, params)
+        measured = _measure(xyz, section, ground, tree, found, params)
     centre, accept = measured.centre, measured.accept
     accept = accept & _consistent_offsets(
         xyz[:, :2], measured.on_accepted(accept), centre, accept, params
@@ -241,10 +247,12 @@ def _measure(
     xyz: np.ndarray,
     section: np.ndarray,
     ground: np.ndarray,
+    tree: cKDTree | None,
     fits: list[AxisFit],
     params: PoleParams,
 ) -> MeasuredAxes:
-    """Ground, height, members and acceptance of fitted axes (see :func:`detect_poles`)."""
+    """Ground, height, members and acceptance of fitted axes (see :func:`detect_poles`;
+    ``tree``: the ground's :func:`~guardrail_core.reconstruct.poles.ground.ground_tree`)."""
     centre = np.array([f.centre for f in fits])
     radius = np.array([f.radius for f in fits])
     # The base is the bottom of the lowest two nearly consecutive sections holding inliers: a
@@ -262,8 +270,9 @@ def _measure(
     np.minimum.at(low, member_pole[has], xyz[has, 2])
     top, low = np.maximum(top, z_hi), np.minimum(low, z_lo)
     # §4.1: the height of the pole is determined using the ground and the highest point.
-    foot = foot_bottom(centre, radius + params.member_margin_m, z_lo, ground, params.foot_gap_m)
-    base_ref, ground_z = ground_height(centre, np.minimum(low, foot), ground, xyz, params)
+    reach = radius + params.member_margin_m
+    foot = foot_bottom(centre, reach, z_lo, ground, params.foot_gap_m, tree)
+    base_ref, ground_z = ground_height(centre, np.minimum(low, foot), ground, xyz, params, tree)
     height = top - ground_z
     extent_share = (z_hi - z_lo) / np.maximum(height, 1e-9)  # 1e-9: no division by zero
     accept = (

@@ -36,8 +36,20 @@ def grounded_bottom(z: np.ndarray, sec: np.ndarray, params: PoleParams) -> float
     return float(z[sec == first[0]].min())
 
 
+def ground_tree(ground: np.ndarray) -> cKDTree | None:
+    """The 2D search tree of road points ``ground`` (G, 3) that :func:`foot_bottom` and
+    :func:`ground_height` look points up in (None for no points): built once per run, as a run's
+    ground holds up to some 1e5 points and the poles ask about it several times."""
+    return cKDTree(ground[:, :2]) if len(ground) else None
+
+
 def foot_bottom(
-    centre: np.ndarray, reach: np.ndarray, bottom: np.ndarray, ground: np.ndarray, gap: float
+    centre: np.ndarray,
+    reach: np.ndarray,
+    bottom: np.ndarray,
+    ground: np.ndarray,
+    gap: float,
+    tree: cKDTree | None = None,
 ) -> np.ndarray:
     """Bottoms (P,) of axes, metres, lowered along road points on their footprints.
 
@@ -45,6 +57,7 @@ def foot_bottom(
     ----------
     centre : (P, 2) axes; reach : (P,) footprint radii; bottom : (P,) lowest pole points
     ground : (G, 3) road points; gap : the largest step (m) from one foot point to the next
+    tree : :func:`ground_tree` of ``ground`` (None: built here)
 
     Starting at ``bottom``, the road points within ``reach`` of the axis, from the highest
     down, continue the pole while each lies at most ``gap`` below the previous one.
@@ -52,7 +65,8 @@ def foot_bottom(
     out = np.asarray(bottom, np.float64).copy()
     if len(ground) == 0 or len(centre) == 0:
         return out
-    tree = cKDTree(ground[:, :2])
+    if tree is None:
+        tree = cKDTree(ground[:, :2])
     for k, near in enumerate(tree.query_ball_point(centre, reach)):  # per axis (a few)
         if not np.isfinite(out[k]) or not near:
             continue
@@ -66,7 +80,12 @@ def foot_bottom(
 
 
 def ground_height(
-    centre: np.ndarray, low: np.ndarray, ground: np.ndarray, xyz: np.ndarray, params: PoleParams
+    centre: np.ndarray,
+    low: np.ndarray,
+    ground: np.ndarray,
+    xyz: np.ndarray,
+    params: PoleParams,
+    tree: cKDTree | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Ground heights (P,) at each axis, metres: (for the base test, for the position).
 
@@ -74,15 +93,20 @@ def ground_height(
     pole's footprint (median z): both the same. Without ground points there: the base is
     tested against the lowest run or road point within ``no_ground_window_m`` (the
     neighbouring pole's base for a baluster), and the position takes the pole's own lowest
-    point ``low`` (P,) (a pole reaches the ground).
+    point ``low`` (P,) (a pole reaches the ground). ``tree``: :func:`ground_tree` of
+    ``ground`` (None: built here).
     """
     out = np.full(len(centre), np.nan)
     if len(ground):
         # Ground points on a footprint are a pole's foot (a sparse scanner's road mask takes
         # some in), not the ground around it: not for this pole, nor for a baluster beside it.
         foot = params.max_radius_m + params.member_margin_m
-        on_foot = cKDTree(centre).query(ground[:, :2], distance_upper_bound=foot)[0] <= foot
-        tree = cKDTree(ground[:, :2])
+        if tree is None:
+            tree = cKDTree(ground[:, :2])
+        # Closer than ``foot`` to an axis: looked up from the (few) axes, not from every point.
+        on_foot = np.zeros(len(ground), bool)
+        for near in tree.query_ball_point(centre, np.nextafter(foot, 0.0)):
+            on_foot[near] = True
         k = min(_GROUND_CANDIDATES * params.ground_k, len(ground))
         d, i = tree.query(centre, k=k, distance_upper_bound=params.ground_radius_m)
         d, i = d.reshape(len(centre), k), i.reshape(len(centre), k)
