@@ -1,6 +1,7 @@
 """The embedded LocalCluster: its workers keep glibc's own memory management (Dask's nanny would
 set a 64 KiB trim threshold, which made every tile about 30 % slower) and Dask's single-threaded
-numerical libraries, do not run Dask's profiler, and are warmed up with the model before their first tile."""
+numerical libraries, do not run Dask's profiler, and are warmed up with the model before their
+first tile."""
 
 from __future__ import annotations
 

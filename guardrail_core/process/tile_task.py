@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Any
 
 import cv2
+import numba
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -342,7 +343,6 @@ def _near(xy: np.ndarray, targets: np.ndarray, candidates: np.ndarray, reach: fl
     if not targets.any() or not candidates.any() or not reach > 0:
         return np.zeros(0, np.int64)
     target_xy = xy[targets]
-    ids = np.flatnonzero(candidates)
     # No more than _MAX_CELLS cells a side, however far the targets spread.
     extent = float(np.ptp(target_xy, axis=0).max())
     size = max(reach / 3, extent / _MAX_CELLS)
@@ -360,17 +360,43 @@ def _near(xy: np.ndarray, targets: np.ndarray, candidates: np.ndarray, reach: fl
     for offsets, grid in ((gap <= reach * (1 + 1e-9), possible), (span < reach * (1 - 1e-9), sure)):
         for ox, oy in zip(dx[offsets], dy[offsets], strict=True):
             grid[occupied[:, 0] + ox, occupied[:, 1] + oy] = True
-    cell = np.floor((xy[ids] - corner) / size).astype(np.int64)
-    inside = (cell >= 0).all(axis=1) & (cell < shape).all(axis=1)
-    ids, cell = ids[inside], cell[inside]
-    keep = possible[cell[:, 0], cell[:, 1]]
-    ids, cell = ids[keep], cell[keep]
-    in_reach = sure[cell[:, 0], cell[:, 1]]
+    ids, in_reach = _in_possible_cells(xy, candidates, corner, size, possible, sure)
     ring = np.flatnonzero(~in_reach)
     if len(ring):
         distance, _ = cKDTree(target_xy).query(xy[ids[ring]], distance_upper_bound=reach)
         in_reach[ring] = np.isfinite(distance)
     return ids[in_reach]
+
+
+# Compiled: one pass over a window's million road points instead of a dozen numpy passes (the
+# look-up of a 120 m window of the 3 km drive: 0.32 s -> 0.20 s), with the same arithmetic.
+@numba.njit(cache=True, nogil=True)
+def _in_possible_cells(
+    xy: np.ndarray,
+    candidates: np.ndarray,
+    corner: np.ndarray,
+    size: float,
+    possible: np.ndarray,
+    sure: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+    """The ``candidates`` (N,) bool among ``xy`` (N, 2) whose cell of the grid at ``corner``
+    (2,) with cells ``size`` wide is ``possible`` (X, Y) bool, ascending, and whether the cell
+    is ``sure`` (X, Y) bool."""
+    ids = np.empty(len(xy), np.int64)
+    in_reach = np.empty(len(xy), np.bool_)
+    m = 0
+    for i in range(len(xy)):
+        if not candidates[i]:
+            continue
+        cx = np.floor((xy[i, 0] - corner[0]) / size)
+        cy = np.floor((xy[i, 1] - corner[1]) / size)
+        if cx < 0 or cy < 0 or cx >= possible.shape[0] or cy >= possible.shape[1]:
+            continue
+        if possible[int(cx), int(cy)]:
+            ids[m] = i
+            in_reach[m] = sure[int(cx), int(cy)]
+            m += 1
+    return ids[:m], in_reach[:m]
 
 
 def _outcome(
