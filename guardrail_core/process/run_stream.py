@@ -84,7 +84,7 @@ class RunStream:
         ground_index, ground_xyz = self._ground_index[ground_order], self._ground_xyz[ground_order]
         comp, n_comp = link_components(xyz, self.params.runs)
         closed = np.ones(n_comp, bool)
-        boxes = self._boxes_near(open_boxes, np.concatenate([xyz, ground_xyz]))
+        boxes = self._boxes_near(open_boxes, xyz, ground_xyz)
         if boxes is not None:
             lo = np.full((n_comp, 2), np.inf)
             hi = np.full((n_comp, 2), -np.inf)
@@ -107,18 +107,18 @@ class RunStream:
         local = np.full(n_comp, -1, np.int64)
         local[ready] = np.arange(len(ready))
         runs = run_inputs(
-            xyz, local[comp], ground_xyz, self.trajectory, self.params, len(self._first)
+            xyz,
+            local[comp],
+            self._ground_within(ground_xyz, xyz[out[comp], :2]),
+            self.trajectory,
+            self.params,
+            len(self._first),
         )
         self._first.extend(int(index[first[c]]) for c in ready)
         # Keep the points of open runs, and the ground that an open or later run may need.
         keep = ~closed[comp]
         self._index, self._xyz = index[keep], xyz[keep]
         need = np.zeros(len(ground_xyz), bool)
-        if keep.any() and len(ground_xyz):
-            distance, _ = cKDTree(self._xyz[:, :2]).query(
-                ground_xyz[:, :2], distance_upper_bound=self.reach_m
-            )
-            need |= np.isfinite(distance)
         if boxes is not None:
             for box in boxes:
                 need |= (
@@ -127,16 +127,37 @@ class RunStream:
                     & (ground_xyz[:, 1] >= box[1] - self.reach_m)
                     & (ground_xyz[:, 1] <= box[3] + self.reach_m)
                 )
+        rest = np.flatnonzero(~need)  # the ground the open boxes do not keep already
+        if keep.any() and len(rest):
+            distance, _ = cKDTree(self._xyz[:, :2]).query(
+                ground_xyz[rest, :2], distance_upper_bound=self.reach_m
+            )
+            need[rest[np.isfinite(distance)]] = True
         self._ground_index, self._ground_xyz = ground_index[need], ground_xyz[need]
         return runs
 
-    def _boxes_near(self, open_boxes: np.ndarray | None, xyz: np.ndarray) -> np.ndarray | None:
-        """(B', 4): the open boxes within reach of the bounding box of ``xyz`` (N, 3), the
-        points held (most boxes of a survey lie far ahead); None if there are none."""
+    def _ground_within(self, ground_xyz: np.ndarray, xy: np.ndarray) -> np.ndarray:
+        """The ground points (G', 3), in their order, inside the bounding box of ``xy`` (N, 2)
+        widened by the reach: all a closed run made of those points can take in (its ground
+        lies within ``runs.ground_reach_m`` of its points), so its search tree is smaller."""
+        if len(xy) == 0 or len(ground_xyz) == 0:
+            return ground_xyz[:0]
+        lo, hi = xy.min(axis=0) - self.reach_m, xy.max(axis=0) + self.reach_m
+        inside = np.all((ground_xyz[:, :2] >= lo) & (ground_xyz[:, :2] <= hi), axis=1)
+        return ground_xyz[inside]
+
+    def _boxes_near(
+        self, open_boxes: np.ndarray | None, xyz: np.ndarray, ground_xyz: np.ndarray
+    ) -> np.ndarray | None:
+        """(B', 4): the open boxes within reach of the bounding box of the points held,
+        ``xyz`` (N, 3) and ``ground_xyz`` (G, 3) (most boxes of a survey lie far ahead); None
+        if there are none."""
         if open_boxes is None or len(open_boxes) == 0:
             return None
         boxes = np.asarray(open_boxes, np.float64).reshape(-1, 4)
-        lo, hi = xyz[:, :2].min(axis=0) - self.reach_m, xyz[:, :2].max(axis=0) + self.reach_m
+        held = [a[:, :2] for a in (xyz, ground_xyz) if len(a)]
+        lo = np.min([a.min(axis=0) for a in held], axis=0) - self.reach_m
+        hi = np.max([a.max(axis=0) for a in held], axis=0) + self.reach_m
         near = (
             (boxes[:, 0] <= hi[0])
             & (boxes[:, 2] >= lo[0])
