@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
@@ -45,8 +46,6 @@ _COUNT_KEYS = (
 #: Where the embeddings' rows gather before their count, and so ``embeddings.npy``'s header, is
 #: known (in the staging folder; gone when the stitcher finishes).
 _EMBEDDING_ROWS = ".embeddings.rows"
-#: Rows copied at a time into ``embeddings.npy`` (2.6 MB of float16 rows).
-_COPY_ROWS = 1024
 
 
 @dataclass
@@ -209,18 +208,19 @@ class PartStitcher:
             out.write(np.ascontiguousarray(rows, np.float16).tobytes())
 
     def _write_embeddings(self, n: int, width: int) -> None:
-        """``embeddings.npy``, (n, width) float16, from the rows gathered, a slice at a time."""
-        target = np.lib.format.open_memmap(
-            RunFolder(self.staging).embeddings_file, mode="w+", dtype=np.float16, shape=(n, width)
-        )
-        with open(self._embedding_rows, "rb") as rows:
-            for start in range(0, n, _COPY_ROWS):
-                stop = min(start + _COPY_ROWS, n)
-                target[start:stop] = np.frombuffer(
-                    rows.read((stop - start) * width * 2), np.float16
-                ).reshape(stop - start, width)
-        target.flush()
-        del target
+        """``embeddings.npy``, (n, width) float16: the header ``np.save`` writes, then the rows
+        gathered, copied as they are."""
+        header: dict[str, Any] = {
+            "descr": np.lib.format.dtype_to_descr(np.dtype(np.float16)),
+            "fortran_order": False,
+            "shape": (n, width),
+        }
+        with (
+            open(RunFolder(self.staging).embeddings_file, "wb") as out,
+            open(self._embedding_rows, "rb") as rows,
+        ):
+            np.lib.format.write_array_header_1_0(out, header)
+            shutil.copyfileobj(rows, out)
 
     def _write_points(self, d: int) -> None:
         """Drive tile ``d``'s point segments from the pieces of the parts (drive-wide segment
