@@ -31,6 +31,7 @@ def fine_tune(
             params=ClassifierParams(mode=mode),
             include_unreviewed=include_unreviewed,
             progress_fn=lambda f, m: report(0.95 * f, m),
+            drive_root=session.drive.root,
         )
         report(0.96, "saving the model")
         session.models.add(trained.model)
@@ -57,7 +58,7 @@ def activate(session: ReviewSession, version: str) -> dict[str, Any]:
     model = session.models.load(version)
     before = session.effective_label().copy()
     with session.lock:
-        predictions = predict_run(session.run, model)
+        predictions = predict_run(session.run, model, drive_root=session.drive.root)
         write_predictions(session.run.root, predictions, model)
     session.reload_run()
     return {

@@ -19,11 +19,13 @@ import numpy as np
 from app.model_registry import ModelRegistry
 from app.segment_index import SegmentIndex
 from guardrail_core.errors import InvalidOptionError, RunFolderError
+from guardrail_core.extract.classifier_params import ClassifierParams
 from guardrail_core.extract.segment_truth import segment_truth
 from guardrail_core.formats.drive import Drive, load_drive
 from guardrail_core.formats.label_store import LABEL_GUARDRAIL, LABEL_OTHER, LabelChange, LabelStore
 from guardrail_core.formats.run_folder import Run
 from guardrail_core.formats.run_folder_paths import RunFolder
+from guardrail_core.review.run_crops import RunCrops
 from guardrail_core.review.training import segment_labels
 
 #: What the review app writes lives in this folder of the drive: labels outlive run folders.
@@ -32,6 +34,11 @@ LABELS_FILE = "labels.sqlite"
 MODELS_DIR = "models"
 
 LABEL_VALUES = {"other": LABEL_OTHER, "guardrail": LABEL_GUARDRAIL}
+
+#: px, the side of the crops the app shows: the classifier's input (what it saw).
+CROP_PX = ClassifierParams().input_size_px
+#: Decoded drive images kept for the next crop (a gallery page's crops come from a few images).
+CROP_IMAGES_KEPT = 8
 
 #: Listeners hear ``(event, segments)``: "labels" (their effective labels changed),
 #: "selection", "predictions" (a model was activated) or "reconstruction" (it was redone).
@@ -88,6 +95,8 @@ class ReviewSession:
             self.review_dir / LABELS_FILE, n_points=n, drive_name=self.drive.root.name
         )
         self.index = SegmentIndex(self.run.point_segment, len(self.run))
+        # Crops are cut from the drive's images on request; a gallery page mostly asks a few.
+        self.crops = RunCrops(self.run, self.drive.root, keep_images=CROP_IMAGES_KEPT)
         self.models = ModelRegistry(self.review_dir / MODELS_DIR, self.run, model_dir)
         self.truth: np.ndarray | None = None  # (S,) bool, synthetic drives only
         if self.drive.truth is not None:
@@ -201,11 +210,24 @@ class ReviewSession:
 
     # -- models -----------------------------------------------------------------------------
 
+    def crop_jpeg(self, segment: int) -> bytes:
+        """The segment's crop (JPEG, :data:`CROP_PX` px), cut from the drive's image.
+
+        Raises
+        ------
+        RunFolderError
+            The segment has no crop.
+        MissingDriveFileError
+            Its image has gone from the drive folder.
+        """
+        return self.crops.jpeg(segment, CROP_PX)
+
     def reload_run(self) -> None:
         """Read the run folder again (after a model's predictions were written into it)."""
         with self.lock:
             self.run = self.folder.load()
             self.models.run = self.run
+            self.crops = RunCrops(self.run, self.drive.root, keep_images=CROP_IMAGES_KEPT)
         self.notify("predictions", np.arange(self.n_segments))
 
     def close(self) -> None:

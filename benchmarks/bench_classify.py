@@ -66,13 +66,15 @@ Embed = Callable[[np.ndarray], np.ndarray]  # (B, S, S, 3) uint8 -> (B, 1280) fl
 def drive_crops(drive: Path, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A drive's crops (K, S, S, 3) uint8, which of its M segments have them (M,) bool, and the
     segments' features (M, F)."""
-    from guardrail_core.extract.pipeline import extract
+    from guardrail_core.extract.pipeline import extract, segment_crops
     from guardrail_core.formats.drive import load_drive
     from guardrail_core.formats.run_folder import CROP_OK
 
-    result = extract(load_drive(drive, with_truth=False), size)
+    loaded = load_drive(drive, with_truth=False)
+    result = extract(loaded)
     has_crop = result.choice.status == CROP_OK
-    return result.crops[has_crop], has_crop, result.features
+    crops = segment_crops(loaded, result.choice, np.flatnonzero(has_crop), size)
+    return crops, has_crop, result.features
 
 
 def torch_variants(size: int) -> dict[str, Embed]:

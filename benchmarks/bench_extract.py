@@ -38,7 +38,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from guardrail_core.extract.classify import ClassifierParams, train_classifier  # noqa: E402
 from guardrail_core.extract.crops import CROP_OK  # noqa: E402
 from guardrail_core.extract.lattice import build_lattice  # noqa: E402
-from guardrail_core.extract.pipeline import extract, slice_drive  # noqa: E402
+from guardrail_core.extract.pipeline import extract, segment_crops, slice_drive  # noqa: E402
 from guardrail_core.extract.road import remove_road  # noqa: E402
 from guardrail_core.extract.segments import SegmentParams, wireframe_components  # noqa: E402
 from guardrail_core.formats.drive import load_drive  # noqa: E402
@@ -128,8 +128,9 @@ def bench_dbscan(drive) -> dict:
 
 
 def bench_inference(drive) -> dict:
-    result = extract(drive, ClassifierParams().input_size_px)
-    crops = result.crops[result.choice.status == CROP_OK]
+    result = extract(drive)
+    ok = np.flatnonzero(result.choice.status == CROP_OK)
+    crops = segment_crops(drive, result.choice, ok, ClassifierParams().input_size_px)
     rng = np.random.default_rng(0)
     labels = rng.random(len(crops)) < 0.5  # the head's weights do not change its speed
     model = train_classifier(

@@ -23,7 +23,7 @@ from guardrail_core.extract.classify import classification_metrics
 from guardrail_core.extract.correct import correct_labels
 from guardrail_core.extract.crops import CROP_OK
 from guardrail_core.extract.model_folder import load_model
-from guardrail_core.extract.pipeline import ExtractionParams, extract
+from guardrail_core.extract.pipeline import ExtractionParams, extract, segment_crops
 from guardrail_core.extract.segment_truth import segment_truth
 from guardrail_core.formats.drive import load_drive
 
@@ -33,12 +33,13 @@ PATHS = ("crop CNN alone", "geometry alone", "fused")
 def path_labels(drive_path: Path, model, params: ExtractionParams) -> tuple[str, dict]:
     """The drive's kind and, per path, (truth, raw label, corrected label) of every segment."""
     drive = load_drive(drive_path)
-    result = extract(drive, model.input_size, params)
+    result = extract(drive, params)
     truth = segment_truth(drive.truth.point_class, result.point_segment, len(result.segments))
     ok = np.flatnonzero(result.choice.status == CROP_OK)
     crop_proba = np.full(len(result.segments), np.nan)
     if len(ok):
-        crop_proba[ok] = model.predict_proba(result.crops[ok])
+        crops = segment_crops(drive, result.choice, ok, model.input_size, params.crops)
+        crop_proba[ok] = model.predict_proba(crops)
     withheld = np.full(len(result.segments), np.nan)
     probability = {
         # Without a crop the CNN has no answer: the segment counts as not guardrail.

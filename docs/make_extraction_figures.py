@@ -41,6 +41,7 @@ from guardrail_core.extract.crops import CROP_OK  # noqa: E402
 from guardrail_core.extract.segment_truth import segment_truth  # noqa: E402
 from guardrail_core.formats.drive import Drive, load_drive  # noqa: E402
 from guardrail_core.formats.run_folder import Run, load_run  # noqa: E402
+from guardrail_core.review.run_crops import read_crops  # noqa: E402
 
 FOUND = (235, 30, 30)
 OTHER = (70, 130, 220)
@@ -106,7 +107,7 @@ def make_crops(drive: Drive, run: Run, out: Path, per_row: int = 10, rows: int =
         chosen = rng.choice(np.flatnonzero(pick), size=per_row * rows, replace=False)
         tiles = []
         for s in chosen:
-            tile = cv2.cvtColor(cv2.imread(str(run.crop_path(int(s)))), cv2.COLOR_BGR2RGB)
+            tile = read_crops(run, np.array([s]), 128, drive_root=drive.root)[0]  # as classified
             tile = cv2.resize(tile, (160, 160), interpolation=cv2.INTER_LINEAR)
             p = float(run.segments["probability"][s])
             colour = FOUND if run.segments["raw_label"][s] else OTHER

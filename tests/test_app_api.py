@@ -6,6 +6,7 @@ import json
 from collections.abc import Iterator
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 from fastapi.testclient import TestClient
@@ -14,6 +15,7 @@ from app.jobs import JobRunner
 from app.main import create_app
 from app.session import ReviewSession
 from guardrail_core.errors import InvalidOptionError
+from guardrail_core.extract.crops import CropParams, crop_window, cut_crop
 from guardrail_core.formats.run_folder import load_run
 from tests.app_fixtures import copy_run, new_session
 
@@ -163,13 +165,21 @@ def test_selection_round_trip(client: TestClient, session: ReviewSession) -> Non
 
 
 def test_crops_are_served_and_missing_ones_are_404(client: TestClient, session: ReviewSession):
+    """The crop is cut from the drive's image on request (the run stores none)."""
     s = _segment_with_crop(session)
     response = client.get(f"/api/segments/{s}/crop.jpg")
     assert response.status_code == 200 and response.headers["content-type"] == "image/jpeg"
-    assert response.content[:2] == b"\xff\xd8"
-    without = np.flatnonzero(session.run.segments["crop_status"] != 0)
-    if len(without):
-        assert client.get(f"/api/segments/{int(without[0])}/crop.jpg").status_code == 404
+    served = cv2.imdecode(np.frombuffer(response.content, np.uint8), cv2.IMREAD_COLOR)[:, :, ::-1]
+    drive, seg = session.drive, session.run.segments
+    image = drive.read_image(drive.images[int(seg["image"][s])])
+    top_left, side = crop_window(seg["rect"][s], CropParams())
+    expected = cut_crop(image, top_left[0], int(side[0]), 128)
+    assert served.shape == (128, 128, 3)
+    assert np.abs(served.astype(float) - expected).mean() < 3.0  # JPEG's loss only
+    without = np.flatnonzero(seg["crop_status"] != 0)
+    assert len(without)
+    assert client.get(f"/api/segments/{int(without[0])}/crop.jpg").status_code == 404
+    assert client.get(f"/api/segments/{len(seg['image'])}/crop.jpg").status_code == 404
 
 
 def test_token_is_checked_on_every_api_call(session: ReviewSession) -> None:

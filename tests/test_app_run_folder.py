@@ -88,8 +88,8 @@ def test_a_session_refuses_what_is_not_a_run_of_this_version(
     run = tmp_path / "run"
     run.mkdir()
     (run / "run.json").write_text((run_path / "run.json").read_text())
-    _set_version(run / "run.json", 4)
-    with pytest.raises(RunFormatVersionError, match="run format version 4"):
+    _set_version(run / "run.json", 5)
+    with pytest.raises(RunFormatVersionError, match="run format version 5"):
         ReviewSession(drive_path, run, review_dir=tmp_path / "review")
 
 

@@ -316,7 +316,7 @@ def test_a_run_without_reconstruction_has_no_pole_points_and_warns(
     run_path: Path, drive_path: Path, tmp_path: Path
 ) -> None:
     run = tmp_path / "run"
-    shutil.copytree(run_path, run, ignore=shutil.ignore_patterns(RECONSTRUCTION_DIR, "crops"))
+    shutil.copytree(run_path, run, ignore=shutil.ignore_patterns(RECONSTRUCTION_DIR))
     summary = export_run_las(run, tmp_path / "result.laz", drive_dir=drive_path)
     assert summary.pole_points == summary.run_points == 0
     assert summary.guardrail_points > 0
@@ -368,14 +368,14 @@ def test_an_output_that_is_an_input_is_refused_and_the_inputs_survive(
     points = tile_file(drive)
     run = tmp_path / "run"
     shutil.copytree(run_path, run)
-    (run / "crops" / "old.laz").write_bytes(b"not the run's, but in its crops folder")
+    (run / "points" / "old.laz").write_bytes(b"not the run's, but in its points folder")
     (tmp_path / "alias").symlink_to(drive)
     before = file_tree(tmp_path)
     for out in (points, tmp_path / "alias" / points.relative_to(drive)):
         with pytest.raises(InputInsideOutputError, match="is the input"):
             export_run_las(run, out, drive_dir=drive, overwrite=True)
     with pytest.raises(InputInsideOutputError, match="inside the input folder"):
-        export_run_las(run, run / "crops" / "old.laz", drive_dir=drive, overwrite=True)
+        export_run_las(run, run / "points" / "old.laz", drive_dir=drive, overwrite=True)
     command = ["export", str(run), "--las", str(points), "--drive", str(drive), "--overwrite"]
     assert main(command) == 2
     assert "InputInsideOutputError" in capsys.readouterr().err
@@ -449,7 +449,7 @@ def test_export_command_with_another_drive_fails_with_a_message(
 
 def test_a_run_whose_drive_moved_names_the_drive_option(run_path: Path, tmp_path: Path) -> None:
     run = tmp_path / "run"
-    shutil.copytree(run_path, run, ignore=shutil.ignore_patterns(RECONSTRUCTION_DIR, "crops"))
+    shutil.copytree(run_path, run, ignore=shutil.ignore_patterns(RECONSTRUCTION_DIR))
     info = json.loads((run / "run.json").read_text())
     info["drive"]["path"] = str(tmp_path / "moved")
     (run / "run.json").write_text(json.dumps(info))

@@ -6,6 +6,7 @@ import json
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from guardrail_core.errors import (
@@ -21,6 +22,7 @@ from guardrail_core.formats.run_folder import RUN_FORMAT_VERSION, load_run
 from guardrail_core.formats.run_folder_paths import RunFolder
 from guardrail_core.formats.run_info import RunInfo
 from guardrail_core.reconstruct.run_models import load_run_models
+from guardrail_core.review.run_crops import read_crops
 
 
 def _run_json_only(run_path: Path, out: Path, **changes: object) -> Path:
@@ -54,15 +56,31 @@ def test_a_folder_without_run_json_is_not_a_run_folder(tmp_path: Path, drive_pat
         RunFolder.open(tmp_path)
 
 
-@pytest.mark.parametrize("version", [RUN_FORMAT_VERSION + 1, 1, None, "2"])
+@pytest.mark.parametrize("version", [RUN_FORMAT_VERSION + 1, 2, 1, None, "3", 3.0, True])
 def test_another_run_format_version_is_refused_by_name(
     run_path: Path, tmp_path: Path, version: object
 ) -> None:
     folder = _run_json_only(run_path, tmp_path / "run", format_version=version)
     with pytest.raises(RunFormatVersionError, match=f"run format version {version!r}") as caught:
         RunFolder.open(folder)
-    assert f"reads {RUN_FORMAT_VERSION}" in str(caught.value)
+    assert "reads 3 and 4" in str(caught.value)
     assert str(folder / "run.json") in str(caught.value)
+
+
+def test_a_format_3_run_is_read_and_its_crops_folder_goes_unused(
+    run_path: Path, tmp_path: Path
+) -> None:
+    """Format 3 is format 4 with a JPEG of every crop; the crops are cut from the drive now."""
+    assert RUN_FORMAT_VERSION == 4
+    folder = tmp_path / "run3"
+    shutil.copytree(run_path, folder)
+    info = json.loads((folder / "run.json").read_text())
+    (folder / "run.json").write_text(json.dumps({**info, "format_version": 3}))
+    (folder / "crops").mkdir()
+    run = load_run(folder)
+    assert run.info.format_version == 3
+    ok = np.flatnonzero(run.segments["crop_status"] == 0)[:3]
+    np.testing.assert_array_equal(read_crops(run, ok, 64), read_crops(load_run(run_path), ok, 64))
 
 
 @pytest.mark.parametrize("version", [RECONSTRUCTION_FORMAT_VERSION + 1, 0, None])
@@ -98,11 +116,10 @@ def test_damaged_models_json_is_a_run_folder_error(run_path: Path, tmp_path: Pat
 
 def test_the_paths_of_a_run_folder(run_path: Path) -> None:
     folder = RunFolder.open(run_path)
-    assert folder.crop_path(7) == run_path / "crops" / "000007.jpg"
     assert folder.run_file == run_path / "run.json"
     assert {p.name for p in folder.parts()} == {
         "run.json", "points", "segments.npz", "segments.csv", "timings.json",
-        "embeddings.npy", "crops",
+        "embeddings.npy",
     }  # fmt: skip
     rec = folder.reconstruction
     assert rec.root == run_path / "reconstruction"
@@ -138,7 +155,7 @@ def test_run_json_round_trips_through_run_info(run_path: Path, tmp_path: Path) -
 
 def test_a_missing_table_is_named(run_path: Path, tmp_path: Path) -> None:
     folder = tmp_path / "run"
-    shutil.copytree(run_path, folder, ignore=shutil.ignore_patterns("crops", "reconstruction"))
+    shutil.copytree(run_path, folder, ignore=shutil.ignore_patterns("reconstruction"))
     (folder / "segments.npz").unlink()
     with pytest.raises(RunFolderError, match="segments.npz"):
         load_run(folder)

@@ -25,12 +25,19 @@ def test_shape_first_gives_the_labels_of_asking_every_crop(run_path: Path) -> No
     run = load_run(run_path)
     features = run.segments["features"]
     has_crop = run.segments["crop_status"] == CROP_OK
-    crops = np.zeros((len(run), 128, 128, 3), np.uint8)
-    crops[has_crop] = read_crops(run, np.flatnonzero(has_crop), 128)
+    cut: list[np.ndarray] = []
 
-    every = score_segments(model, features, crops, has_crop, ClassifyParams(shape_first=False))
-    first = score_segments(model, features, crops, has_crop, ClassifyParams(shape_first=True))
+    def crops(rows: np.ndarray) -> np.ndarray:
+        cut.append(rows)
+        return read_crops(run, rows, 128)
 
+    every = score_segments(model, features, has_crop, crops, ClassifyParams(shape_first=False))
+    first = score_segments(model, features, has_crop, crops, ClassifyParams(shape_first=True))
+
+    # Only the crops asked about are cut, once.
+    assert len(cut) == 2
+    np.testing.assert_array_equal(cut[0], np.flatnonzero(every.asked))
+    np.testing.assert_array_equal(cut[1], np.flatnonzero(first.asked))
     np.testing.assert_array_equal(every.asked, has_crop)
     assert 0.2 * has_crop.sum() < first.asked.sum() < 0.8 * has_crop.sum()
     assert not first.asked[~has_crop].any()
@@ -61,6 +68,10 @@ def test_the_embeddings_of_crops_not_asked_are_made_once_and_kept(
     stored = run.embeddings()
     assert stored is not None
     np.testing.assert_array_equal(np.isnan(stored).all(axis=1), missing)  # as process left it
+    # The crops cut now from the drive's images are those process classified.
+    asked = np.flatnonzero(has_crop & ~missing)[:24]
+    again = embed_crops(read_crops(run, asked, 128)).astype(np.float16)
+    np.testing.assert_allclose(again.astype(np.float32), stored[asked], atol=2e-3, rtol=2e-3)
 
     # Only the rows asked for are made.
     some = np.flatnonzero(missing)[:5]

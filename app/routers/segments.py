@@ -6,13 +6,13 @@ from typing import Annotated, Any, Literal
 
 import numpy as np
 from fastapi import APIRouter, Depends, HTTPException, Query
-from fastapi.responses import FileResponse
+from fastapi.responses import Response
 
 from app.dependencies import get_session
 from app.schemas import JPEG, NOT_FOUND, SegmentDetail, SegmentPage
 from app.segment_views import filter_segments, segment_rows
 from app.session import ReviewSession
-from guardrail_core.extract.crops import CROP_OK
+from guardrail_core.errors import MissingDriveFileError
 
 router = APIRouter(prefix="/api/segments", tags=["segments"])
 Session = Annotated[ReviewSession, Depends(get_session)]
@@ -72,11 +72,15 @@ def get_segment(session: Session, segment_id: int) -> dict[str, Any]:
     return row
 
 
-@router.get("/{segment_id}/crop.jpg", response_class=FileResponse, responses={**JPEG, **NOT_FOUND})
-def get_crop(session: Session, segment_id: int) -> FileResponse:
-    """The crop the classifier saw (JPEG); 404 for a segment without one."""
+@router.get("/{segment_id}/crop.jpg", response_class=Response, responses={**JPEG, **NOT_FOUND})
+def get_crop(session: Session, segment_id: int) -> Response:
+    """The crop the classifier sees (JPEG), cut from the drive's image; 404 for a segment
+    without one."""
     s = _segment(session, segment_id)
-    path = session.run.crop_path(s)  # built from the checked integer id only
-    if int(session.run.segments["crop_status"][s]) != CROP_OK or not path.is_file():
+    if not session.crops.has_crop(s):
         raise HTTPException(404, detail=f"segment {s} has no crop")
-    return FileResponse(path, media_type="image/jpeg")
+    try:
+        data = session.crop_jpeg(s)
+    except MissingDriveFileError as exc:  # the drive's image went away while serving
+        raise HTTPException(404, detail=f"segment {s}: {exc}") from exc
+    return Response(data, media_type="image/jpeg")

@@ -14,7 +14,6 @@ import threading
 import time
 from typing import Any
 
-import cv2
 import numpy as np
 import trimesh
 import viser
@@ -27,8 +26,8 @@ from app.scene.picking import in_rectangle, pick_along_ray, project_to_screen
 from app.scene.tuning import TUNABLE, RunTuner, slider_value, with_value
 from app.scene.window import window_points
 from app.segment_views import review_queue
-from app.session import ReviewSession
-from guardrail_core.errors import GuardrailError, RunFolderError
+from app.session import CROP_PX, ReviewSession
+from guardrail_core.errors import GuardrailError, MissingDriveFileError, RunFolderError
 from guardrail_core.io.meshes import run_file_stem
 from guardrail_core.reconstruct.assemble import run_mesh
 from guardrail_core.reconstruct.pipeline import ReconstructionParams
@@ -410,8 +409,13 @@ class ReviewScene:
             f"raw {'guardrail' if seg['raw_label'][s] else 'other'}  \n"
             f"label **{label}** ({reviewed}) · {int(seg['n_points'][s])} points"
         )
-        crop = cv2.imread(str(session.run.crop_path(s)))  # None without a crop
-        self._crop.image = np.zeros((8, 8, 3), np.uint8) if crop is None else crop[:, :, ::-1]
+        crop = np.zeros((8, 8, 3), np.uint8)
+        if session.crops.has_crop(s):
+            try:
+                crop = session.crops.cut(np.array([s]), CROP_PX)[0]
+            except MissingDriveFileError:  # the image went from the drive: no crop to show
+                pass
+        self._crop.image = crop
 
     def label_selection(self, label: str, *, expand: str = "none") -> None:
         if len(self.session.selection):

@@ -232,25 +232,37 @@ def cut_crop(image: np.ndarray, top_left: np.ndarray, side: int, size: int) -> n
 
 def cut_crops(
     read_image: Callable[[int], np.ndarray],
-    choice: CropChoice,
+    image: np.ndarray,
+    rect: np.ndarray,
     size: int,
     params: CropParams = CropParams(),
     *,
     progress: Callable[[int], None] | None = None,
 ) -> np.ndarray:
-    """Crops (S, size, size, 3) uint8 RGB of every segment; black where the status is not ok.
+    """Crops (K, size, size, 3) uint8 RGB of K chosen images and rectangles.
 
-    ``read_image(i)`` returns image ``i`` (H, W, 3) uint8 RGB; each image is read once.
-    ``progress`` is called with the number of crops cut from each image.
+    Parameters
+    ----------
+    read_image : ``read_image(i)`` returns image ``i`` (H, W, 3) uint8 RGB; each image is read
+        once
+    image : (K,) int64, the chosen image of every crop (:attr:`CropChoice.image`)
+    rect : (K, 4) int32, its rectangle around the projected points (:attr:`CropChoice.rect`)
+    size : px, the crops' side
+    params : margin and smallest window
+    progress : called with the number of crops cut from each image
     """
-    crops = np.zeros((len(choice.image), size, size, 3), np.uint8)
-    ok = np.flatnonzero(choice.status == CROP_OK)
-    top_left, side = crop_window(choice.rect[ok], params)
-    for index in np.unique(choice.image[ok]):
-        rows = np.flatnonzero(choice.image[ok] == index)
+    image = np.asarray(image, np.int64).reshape(-1)
+    crops = np.empty((len(image), size, size, 3), np.uint8)
+    if len(image) == 0:
+        return crops
+    if (image < 0).any():
+        raise ValueError("cut_crops: a crop without an image (index -1) was asked for")
+    top_left, side = crop_window(rect, params)
+    for index in np.unique(image):
+        rows = np.flatnonzero(image == index)
         picture = read_image(int(index))
         for row in rows:
-            crops[ok[row]] = cut_crop(picture, top_left[row], int(side[row]), size)
+            crops[row] = cut_crop(picture, top_left[row], int(side[row]), size)
         if progress is not None:
             progress(len(rows))
     return crops

@@ -89,7 +89,8 @@ _STAGES: dict[str, type[StageParams]] = {
 
 @dataclass(frozen=True)
 class Extraction:
-    """Sliced segments of a drive and their crops (everything before the classifier).
+    """Sliced segments of a drive and the image each is cropped from (everything before the
+    classifier; :func:`segment_crops` cuts the crops asked for).
 
     Attributes
     ----------
@@ -99,7 +100,6 @@ class Extraction:
     features : (S, SEGMENT_FEATURE_DIM) float32, shape and neighbour features
         (:mod:`guardrail_core.extract.shape_features`)
     choice : chosen image and rectangle per segment
-    crops : (S, size, size, 3) uint8 RGB, black where there is no crop
     """
 
     point_segment: np.ndarray
@@ -107,7 +107,6 @@ class Extraction:
     summary: SegmentSummary
     features: np.ndarray
     choice: CropChoice
-    crops: np.ndarray
 
     def extents(self) -> SegmentExtents:
         return segment_extents(self.segments, self.summary)
@@ -178,7 +177,6 @@ def slice_drive(
 
 def extract(
     drive: Drive,
-    crop_size: int,
     params: ExtractionParams = ExtractionParams(),
     *,
     timer: StageTimer | None = None,
@@ -186,11 +184,11 @@ def extract(
     track: TrackCoordinates | None = None,
     crop_range_m: tuple[float, float] | None = None,
 ) -> Extraction:
-    """Slice a drive (§3.1) and crop every segment's image (§3.2) at ``crop_size`` pixels
-    (``track``: see :func:`slice_drive`).
+    """Slice a drive (§3.1) and choose every segment's image and rectangle (§3.2)
+    (``track``: see :func:`slice_drive`); :func:`segment_crops` cuts the crops.
 
     ``crop_range_m``: [first, last) metres along the trajectory; only segments whose slice
-    starts there are cropped, the others get :data:`CROP_NO_IMAGE` (a processing tile's margin
+    starts there get an image, the others get :data:`CROP_NO_IMAGE` (a processing tile's margin
     beyond what its own labels depend on). None: every segment."""
     timer = timer or StageTimer(len(drive.points))
     point_segment, segments, summary, features = slice_drive(
@@ -219,13 +217,36 @@ def extract(
                     choice.status.dtype
                 ),
             )
-        n_ok = int((choice.status == CROP_OK).sum())
-        with tqdm(total=n_ok, desc="cutting crops", unit="crop", disable=not progress) as bar:
-            crops = cut_crops(
-                lambda i: drive.read_image(drive.images[i]),
-                choice,
-                crop_size,
-                params.crops,
-                progress=bar.update,
-            )
-    return Extraction(point_segment, segments, summary, features, choice, crops)
+    return Extraction(point_segment, segments, summary, features, choice)
+
+
+def segment_crops(
+    drive: Drive,
+    choice: CropChoice,
+    rows: np.ndarray,
+    size: int,
+    params: CropParams = CropParams(),
+    *,
+    progress: bool = False,
+) -> np.ndarray:
+    """(K, size, size, 3) uint8 RGB crops of the segments ``rows`` (K,), each of which must have
+    one (status ok), cut from the drive's images; an image is decoded only when a crop asked
+    for lies in it.
+
+    Raises
+    ------
+    ValueError
+        A segment of ``rows`` has no crop.
+    """
+    rows = np.asarray(rows, np.int64).reshape(-1)
+    if (choice.status[rows] != CROP_OK).any():
+        raise ValueError("segment_crops: a segment without a crop was asked for")
+    with tqdm(total=len(rows), desc="cutting crops", unit="crop", disable=not progress) as bar:
+        return cut_crops(
+            lambda i: drive.read_image(drive.images[i]),
+            choice.image[rows],
+            choice.rect[rows],
+            size,
+            params,
+            progress=bar.update,
+        )

@@ -4,18 +4,19 @@ With a segment head, a segment's label fuses its shape and neighbour features wi
 probability, and for most segments the shape alone already puts the label on one side of the
 threshold whatever the crop says (:meth:`GuardrailClassifier.shape_decides`, exact). Those crops
 are not run through the CNN: their ``crop_probability`` is NaN, their embedding row NaN ("not
-asked"), their ``probability`` the head's answer for a crop probability of 0.5, and their label
-the one any crop would give. The head sees a crop's probability clipped to
-[``crop_probability_clip``, 1 - ``crop_probability_clip``] (1 % by default): the CNN is
+asked"), their ``probability`` the head's answer for a crop probability of 0.5, their label the
+one any crop would give, and their crops are not even cut. The head sees a crop's probability
+clipped to [``crop_probability_clip``, 1 - ``crop_probability_clip``] (1 % by default): the CNN is
 overconfident on streets it never saw, and a crop it is sure of beyond that does not overrule a
 clear shape. On the simulated streets the shape then decides about 85 % of the crops (about
 65 % without the clip), and the CNN was about half of processing. The review loop embeds the
-crops not asked from their JPEGs the first time it needs them
-(:mod:`guardrail_core.review.embeddings`).
+crops not asked, cut from the drive's images, the first time it needs them
+(:mod:`guardrail_core.review.run_crops`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -78,8 +79,8 @@ class SegmentScores:
 def score_segments(
     model: GuardrailClassifier,
     features: np.ndarray,
-    crops: np.ndarray,
     has_crop: np.ndarray,
+    crops: Callable[[np.ndarray], np.ndarray],
     params: ClassifyParams = ClassifyParams(),
     *,
     progress: bool = False,
@@ -90,8 +91,9 @@ def score_segments(
     ----------
     model : the classifier
     features : (S, F) float32 shape and neighbour features
-    crops : (S, C, C, 3) uint8 RGB crops (only rows with ``has_crop`` are read)
     has_crop : (S,) bool, segments with a crop
+    crops : ``crops(rows)``: the (K, C, C, 3) uint8 RGB crops of the segments ``rows`` (K,)
+        int64, all with a crop; called once, with the crops the CNN is asked about
     params : whether the shape is asked first
     """
     from guardrail_core.extract.backbone import EMBEDDING_DIM
@@ -105,11 +107,12 @@ def score_segments(
         embeddings = np.zeros((len(features), EMBEDDING_DIM), np.float32)
         embeddings[has_crop & ~asked] = np.nan
     if len(rows):
+        asked_crops = crops(rows)
         if embeddings is not None:
-            embeddings[rows] = model.embed(crops[rows], progress=progress)
+            embeddings[rows] = model.embed(asked_crops, progress=progress)
             crop_probability[rows] = model.predict_proba(embeddings=embeddings[rows])
         else:
-            crop_probability[rows] = model.predict_proba(crops[rows], progress=progress)
+            crop_probability[rows] = model.predict_proba(asked_crops, progress=progress)
     probability, raw_label = fuse_scores(
         model, features, has_crop, crop_probability, params.crop_probability_clip
     )

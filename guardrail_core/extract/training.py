@@ -23,7 +23,7 @@ from guardrail_core.extract.classifier_training import (
 )
 from guardrail_core.extract.crop_classifier import GuardrailClassifier, model_version
 from guardrail_core.extract.crops import CROP_OK
-from guardrail_core.extract.pipeline import ExtractionParams, extract
+from guardrail_core.extract.pipeline import ExtractionParams, extract, segment_crops
 from guardrail_core.extract.segment_head import SegmentHeadParams, fit_segment_head
 from guardrail_core.extract.segment_truth import segment_truth
 from guardrail_core.extract.shape_features import SEGMENT_FEATURE_NAMES
@@ -104,7 +104,7 @@ def labelled_segments(
             raise MissingDriveFileError(
                 f"{path}: no truth/ folder; training needs labelled drives (synthetic ones)"
             )
-        result = extract(drive, crop_size, params, progress=progress)
+        result = extract(drive, params, progress=progress)
         truth = segment_truth(drive.truth.point_class, result.point_segment, len(result.segments))
         has_crop = result.choice.status == CROP_OK
         block = result.segments.slice_index // HOLD_OUT_BLOCK_SLICES
@@ -112,7 +112,16 @@ def labelled_segments(
         parts["labels"].append(truth)
         parts["groups"].append(index * 1_000_000 + block - block.min(initial=0))
         parts["crop"].append(has_crop)
-        crops.append(result.crops[has_crop])
+        crops.append(
+            segment_crops(
+                drive,
+                result.choice,
+                np.flatnonzero(has_crop),
+                crop_size,
+                params.crops,
+                progress=progress,
+            )
+        )
         sources.append(
             {
                 "drive": str(Path(path).resolve()),

@@ -207,7 +207,8 @@ class ReconstructionFolder:
 def read_versioned_json(
     path: Path, version: Any, mismatch: Callable[[Any], GuardrailError]
 ) -> dict[str, Any]:
-    """The JSON object in ``path``, whose ``format_version`` must be ``version``.
+    """The JSON object in ``path``, whose ``format_version`` must be ``version`` (or one of them,
+    given a tuple).
 
     Raises
     ------
@@ -221,6 +222,8 @@ def read_versioned_json(
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise RunFolderError(f"{path}: not valid JSON ({exc})") from exc
     found = data.get("format_version") if isinstance(data, dict) else None
-    if found != version:
+    accepted = version if isinstance(version, tuple) else (version,)
+    # type() too: True == 1 and 3.0 == 3, but neither is a format version.
+    if not any(type(found) is type(v) and found == v for v in accepted):
         raise mismatch(found)
     return data

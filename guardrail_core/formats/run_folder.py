@@ -9,7 +9,6 @@
       segments.npz      one row per segment: geometry, chosen image and rectangle, crop status,
                         probability, raw and corrected labels (see SEGMENT_FIELDS)
       segments.csv      the same table for people and spreadsheets
-      crops/NNNNNN.jpg  the crop the classifier saw, per segment with a crop
       embeddings.npy    (S, 1280) float16 backbone embeddings (fast models), for quick retraining
       timings.json      points in and seconds of every stage
 """
@@ -32,8 +31,12 @@ from guardrail_core.formats.run_info import RunInfo
 if TYPE_CHECKING:
     from guardrail_core.formats.run_folder_paths import RunFolder
 
-#: 2: segments fused from shape and crop (features, crop_probability); 3: points/ in tiles
-RUN_FORMAT_VERSION = 3
+#: 2: segments fused from shape and crop (features, crop_probability); 3: points/ in tiles;
+#: 4: no crops/ folder (a crop is cut from the drive's image when it is needed:
+#: :mod:`guardrail_core.review.run_crops`)
+RUN_FORMAT_VERSION = 4
+#: Versions read: a format 3 folder is a format 4 one with JPEGs of its crops, which go unused.
+RUN_FORMAT_VERSIONS_READ = (3, 4)
 #: The files of a run folder (their paths: :class:`guardrail_core.formats.run_folder_paths.RunFolder`).
 RUN_FILE = "run.json"
 POINTS_DIR = "points"
@@ -41,7 +44,6 @@ SEGMENTS_FILE = "segments.npz"
 SEGMENTS_CSV = "segments.csv"
 TIMINGS_FILE = "timings.json"
 EMBEDDINGS_FILE = "embeddings.npy"
-CROPS_DIR = "crops"
 POINT_ROAD = -1
 POINT_OFF_ROAD = -2
 #: A point of a processing tile that failed (``run.json`` ``tiles`` says why).
@@ -107,17 +109,9 @@ class Run:
 
         return RunFolder(self.root)
 
-    def crop_path(self, segment: int) -> Path:
-        return self.folder.crop_path(segment)
-
     def embeddings(self) -> np.ndarray | None:
         """(S, 1280) float16 backbone embeddings, or None when the run has none."""
         return self.folder.embeddings()
-
-
-def crop_name(segment: int) -> str:
-    """``crops/NNNNNN.jpg``: a segment's crop, relative to the run folder."""
-    return f"{CROPS_DIR}/{segment:06d}.jpg"
 
 
 def point_tile_name(tile: int) -> str:

@@ -2,7 +2,7 @@
 
 ``RunFolder(path)`` names a folder and reads nothing (a staging folder being written is one too);
 ``RunFolder.open(path)`` also checks that it is a run folder of this format version. The library
-and the app ask it for paths (``.crop_path(s)``, ``.reconstruction.mesh_path(run_id, "glb")``)
+and the app ask it for paths (``.point_tile_path(t)``, ``.reconstruction.mesh_path(run_id, "glb")``)
 instead of building their own, so the layout and its checks live in one place
 (:mod:`guardrail_core.formats.run_folder` writes it; docs/run-folder.md describes it).
 """
@@ -23,17 +23,15 @@ from guardrail_core.formats.reconstruction_folder import (
     read_versioned_json,
 )
 from guardrail_core.formats.run_folder import (
-    CROPS_DIR,
     EMBEDDINGS_FILE,
     POINTS_DIR,
     RUN_FILE,
-    RUN_FORMAT_VERSION,
+    RUN_FORMAT_VERSIONS_READ,
     SEGMENT_FIELDS,
     SEGMENTS_CSV,
     SEGMENTS_FILE,
     TIMINGS_FILE,
     Run,
-    crop_name,
     point_tile_name,
 )
 from guardrail_core.formats.run_info import RunInfo
@@ -101,14 +99,6 @@ class RunFolder:
         return self.root / EMBEDDINGS_FILE
 
     @property
-    def crops_dir(self) -> Path:
-        return self.root / CROPS_DIR
-
-    def crop_path(self, segment: int) -> Path:
-        """``crops/NNNNNN.jpg``: the crop of a segment (it exists only where its status is ok)."""
-        return self.root / crop_name(int(segment))
-
-    @property
     def reconstruction(self) -> ReconstructionFolder:
         """Its ``reconstruction/`` folder (which may not exist)."""
         return ReconstructionFolder(self.root / RECONSTRUCTION_DIR)
@@ -122,7 +112,6 @@ class RunFolder:
             self.segments_csv,
             self.timings_file,
             self.embeddings_file,
-            self.crops_dir,
         ]
 
     def exists(self) -> bool:
@@ -140,10 +129,11 @@ class RunFolder:
             )
         return read_versioned_json(
             self.run_file,
-            RUN_FORMAT_VERSION,
+            RUN_FORMAT_VERSIONS_READ,
             lambda found: RunFormatVersionError(
                 f"{self.run_file}: run format version {found!r}, this version of the tool "
-                f"reads {RUN_FORMAT_VERSION}; process the drive again"
+                f"reads {' and '.join(map(str, RUN_FORMAT_VERSIONS_READ))}; process the drive "
+                "again"
             ),
         )
 

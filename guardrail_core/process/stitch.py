@@ -1,7 +1,7 @@
 """Join the parts of the processing tiles into one run folder, as the tiles end.
 
-Segments get drive-wide numbers (tile by tile, in each tile's order), crops are renamed to
-them, the points' segments are written per drive tile (``points/DDDDDD.npz``) and the crops'
+Segments get drive-wide numbers (tile by tile, in each tile's order), the points' segments
+are written per drive tile (``points/DDDDDD.npz``) and the crops'
 embeddings are appended to the run's ``embeddings.npy`` as each part is joined, so that this
 process holds neither (a 3 km drive has 165 MB of embeddings; a survey day some GB). Each
 part's guardrail points go to the reconstruction's :class:`~.run_stream.RunStream` as it is
@@ -11,7 +11,6 @@ joined (:meth:`PartStitcher.add` says which parts were).
 from __future__ import annotations
 
 import json
-import os
 import shutil
 from collections import defaultdict
 from dataclasses import dataclass
@@ -23,7 +22,6 @@ import numpy as np
 from guardrail_core.formats.run_folder import (
     POINT_UNPROCESSED,
     SEGMENT_FIELDS,
-    crop_name,
     write_point_tile,
 )
 from guardrail_core.formats.run_folder_paths import RunFolder
@@ -50,8 +48,8 @@ _EMBEDDING_ROWS = ".embeddings.rows"
 
 @dataclass
 class Stitched:
-    """The joined run: its segment table, counts and timings (its crops, point tiles and
-    embeddings are in the staging folder).
+    """The joined run: its segment table, counts and timings (its point tiles and embeddings are
+    in the staging folder).
 
     Attributes
     ----------
@@ -109,7 +107,6 @@ class PartStitcher:
         self._stages: dict[str, dict[str, float]] = {}
         self._offset = 0
         self._component_offset = 0
-        (self.staging / "crops").mkdir(exist_ok=True)
 
     @property
     def joined(self) -> int:
@@ -181,12 +178,6 @@ class PartStitcher:
             table["component"] = table["component"] + self._component_offset
             self._component_offset = int(table["component"].max()) + 1
             self._tables.append(table)
-            # Strings, not Paths, in any order: a 3 km drive moves some 57,000 crops.
-            staging = str(self.staging)
-            with os.scandir(part / "crops") as crops:
-                for crop in crops:
-                    number = self._offset + int(crop.name.removesuffix(".jpg"))
-                    os.replace(crop.path, f"{staging}/{crop_name(number)}")
             if (part / "embeddings.npy").is_file():
                 if self._has_embeddings:
                     self._add_embeddings(np.load(part / "embeddings.npy"), n)

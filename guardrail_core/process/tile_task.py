@@ -5,7 +5,6 @@ A part is a folder of small files (``process/stitch.py`` joins the parts into th
 
     part.json          the tile's counts and timings
     segments.npz       SEGMENT_FIELDS rows of the segments it owns (image: drive-wide index)
-    crops/NNNNNN.jpg   their crops, by the segment's number within the part
     embeddings.npy     their backbone embeddings (fast models)
     points/DDDDDD.npz  per drive tile D it owns points of: their index in D and their segment
                        (within the part; POINT_ROAD, POINT_OFF_ROAD)
@@ -27,7 +26,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numba
 import numpy as np
 from scipy.spatial import cKDTree
@@ -35,7 +33,7 @@ from scipy.spatial import cKDTree
 from guardrail_core.errors import GuardrailError
 from guardrail_core.extract.classify import GuardrailClassifier
 from guardrail_core.extract.correct import correct_labels, correction_reach_slices
-from guardrail_core.extract.pipeline import ExtractionParams, extract
+from guardrail_core.extract.pipeline import ExtractionParams, extract, segment_crops
 from guardrail_core.extract.segment_scores import score_segments
 from guardrail_core.formats.drive import Drive, DriveSource, open_drive
 from guardrail_core.formats.run_folder import (
@@ -216,7 +214,6 @@ def process_window(
     reach = correction_reach_slices(params.correction) * params.segments.slice_length_m
     result = extract(
         window,
-        model.input_size,
         params,
         timer=timer,
         progress=progress,
@@ -225,11 +222,13 @@ def process_window(
     )
     segments, choice = result.segments, result.choice
     with timer.stage("classify", points=len(segments)):
+        # Only the crops the CNN is asked about are cut (the run keeps each segment's image and
+        # rectangle: the app and retraining cut the others when they need them).
         scores = score_segments(
             model,
             result.features,
-            result.crops,
             choice.status == CROP_OK,
+            lambda rows: segment_crops(window, choice, rows, model.input_size, params.crops),
             params.classify,
             progress=progress,
         )
@@ -277,13 +276,6 @@ def process_window(
             for name, (dtype, _) in SEGMENT_FIELDS.items()
         }
         np.savez(part / "segments.npz", **own_table)
-        (part / "crops").mkdir()
-        for s in own_ids[choice.status[own_ids] == CROP_OK]:
-            cv2.imwrite(
-                str(part / "crops" / f"{renumber[s]:06d}.jpg"),
-                cv2.cvtColor(result.crops[s], cv2.COLOR_RGB2BGR),  # 15x a reversed-axis copy
-                [cv2.IMWRITE_JPEG_QUALITY, 92],
-            )
         if embeddings is not None:
             np.save(part / "embeddings.npy", embeddings[own_ids].astype(np.float16))
 
@@ -433,7 +425,6 @@ def _write_empty_part(
         width = tuple(0 if s is None else s for s in shape)
         arrays[name] = np.zeros((0, *width), dtype)
     np.savez(part / "segments.npz", **arrays)  # type: ignore[arg-type]
-    (part / "crops").mkdir()
     _write_point_pieces(
         part, index[owned], np.full(int(owned.sum()), POINT_OFF_ROAD, np.int32), drive_offsets
     )

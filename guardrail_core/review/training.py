@@ -10,7 +10,8 @@ them), and can then re-predict the run (:func:`predict_run`) and replace its pre
 
 In fast mode the run's ``embeddings.npy`` stands in for the crops, so no image is decoded and the
 backbone never runs, but once per run for the crops ``guardrail process`` did not ask the CNN
-about (:func:`~guardrail_core.review.run_crops.complete_embeddings`). Measured on the
+about (:func:`~guardrail_core.review.run_crops.complete_embeddings`). Crops are cut from the
+drive's images (``drive_root``, by default ``run.json``'s drive path). Measured on the
 development machine (2 shared CPU cores), fast mode, embeddings complete:
 :func:`train_from_run` on the test run (267 segments, 231 crops) 1.0-1.6 s, on the demo run
 (1,168 segments, 1,018 crops) 2-3 s, and :func:`train_on_set` on the demo set doubled (2,336
@@ -142,6 +143,7 @@ def training_set_from_run(
     mode: str = "fast",
     include_unreviewed: bool = True,
     input_size: int = 128,
+    drive_root: str | Path | None = None,
 ) -> TrainingSet:
     """The run's segments as a training set, labelled by :func:`effective_labels`.
 
@@ -150,9 +152,10 @@ def training_set_from_run(
     run : the run folder
     point_labels : (N,) int8 operator labels of the drive's points
     mode : "fast": the crops' embeddings from ``embeddings.npy`` when the run has them (no image
-        is read); "full" (or a run without embeddings): the crops' JPEGs
+        is read but for the rows the run lacks); "full" (or a run without embeddings): the crops
     include_unreviewed : False keeps only the segments the operators labelled
-    input_size : px, the crops' size the model takes; the run's crops must have it
+    input_size : px, the crops' size the model takes (that of the run's embeddings)
+    drive_root : the drive folder the crops are cut from; None: ``run.json``'s drive path
 
     Returns
     -------
@@ -165,8 +168,8 @@ def training_set_from_run(
     ------
     InvalidOptionError
         Bad mode, or point labels not of the run's drive.
-    RunFolderError
-        A crop JPEG is missing or unreadable, or not ``input_size`` px.
+    MissingDriveFileError
+        An image a crop is cut from is missing or unreadable.
     """
     if mode not in MODES:
         raise InvalidOptionError(f"mode: expected 'fast' or 'full', got {mode!r}")
@@ -176,12 +179,12 @@ def training_set_from_run(
     segments = run.segments
     has_crop = segments["crop_status"][rows] == CROP_OK
     crop_segments = rows[has_crop]
-    stored = complete_embeddings(run, input_size) if mode == "fast" else None
+    stored = complete_embeddings(run, input_size, drive_root=drive_root) if mode == "fast" else None
     crops = embeddings = None
     if stored is not None:
         embeddings = stored[crop_segments].astype(np.float32)
     else:
-        crops = read_crops(run, crop_segments, input_size)
+        crops = read_crops(run, crop_segments, input_size, drive_root=drive_root)
     labels = label[rows]
     return TrainingSet(
         features=np.asarray(segments["features"][rows], np.float32),
@@ -244,6 +247,7 @@ def train_from_run(
     include_unreviewed: bool = True,
     min_reviewed_held_out: int = 20,
     progress_fn: Callable[[float, str], None] | None = None,
+    drive_root: str | Path | None = None,
 ) -> ReviewTraining:
     """Train a new model on a run's segments, labelled by the operators where they reviewed.
 
@@ -252,7 +256,7 @@ def train_from_run(
     run : the run folder
     point_labels : (N,) int8 operator labels of the drive's points (-1 none, 0 other, 1 guardrail)
     params : crop classifier parameters; fast mode trains on the run's ``embeddings.npy`` in
-        seconds, full mode fine-tunes on the crops' JPEGs (minutes)
+        seconds, full mode fine-tunes on the crops (minutes)
     head : segment head parameters
     include_unreviewed : train on every segment (the run's corrected label where not reviewed);
         False: only on the reviewed segments
@@ -260,6 +264,7 @@ def train_from_run(
         operators' labels, when there are at least this many (>= 1); else on every held-out
         segment against the effective labels (see :class:`ReviewTraining`)
     progress_fn : ``progress_fn(fraction 0..1, message)`` at each step
+    drive_root : the drive folder the crops are cut from; None: ``run.json``'s drive path
 
     Returns
     -------
@@ -295,6 +300,7 @@ def train_from_run(
         mode=params.mode,
         include_unreviewed=include_unreviewed,
         input_size=params.input_size_px,
+        drive_root=drive_root,
     )
     reviewed_all = effective_labels(run, point_labels)[1]
     rows = np.arange(len(run)) if include_unreviewed else np.flatnonzero(reviewed_all)
@@ -366,21 +372,25 @@ def train_from_run(
 
 
 def predict_run(
-    run: Run, model: GuardrailClassifier, *, correction: CorrectionParams | None = None
+    run: Run,
+    model: GuardrailClassifier,
+    *,
+    correction: CorrectionParams | None = None,
+    drive_root: str | Path | None = None,
 ) -> dict[str, np.ndarray]:
     """Re-predict every segment of a run with ``model`` (the classify and correction stages).
 
     A fast model classifies the run's stored ``embeddings.npy`` (float16, so with the run's own
     model the crop probabilities agree with the pipeline's to about 2e-5, the segment
     probabilities to about 5e-6 on the demo run); a full model, or a run without embeddings, runs
-    the network on the crops' JPEGs, which the pipeline compressed after classifying them (with the
-    run's model, crop probabilities then differ by up to about 0.04).
+    the network on the crops, cut from the drive's images as the pipeline cut them.
 
     Parameters
     ----------
     run : the run folder
     model : the classifier (with its segment head, if any)
     correction : label correction rules; None takes the run's own (``params.correction``)
+    drive_root : the drive folder the crops are cut from; None: ``run.json``'s drive path
 
     Returns
     -------
@@ -391,8 +401,8 @@ def predict_run(
 
     Raises
     ------
-    RunFolderError
-        A crop JPEG is missing, unreadable or not of the model's input size.
+    MissingDriveFileError
+        An image a crop is cut from is missing or unreadable.
     """
     segments = run.segments
     has_crop = segments["crop_status"] == CROP_OK
@@ -403,11 +413,12 @@ def predict_run(
     if len(rows):
         stored = None
         if model.mode == "fast":
-            stored = complete_embeddings(run, model.input_size, rows=rows)
+            stored = complete_embeddings(run, model.input_size, rows=rows, drive_root=drive_root)
         if stored is not None:
             crop_probability[rows] = model.predict_proba(embeddings=stored[rows].astype(np.float32))
         else:
-            crop_probability[rows] = model.predict_proba(read_crops(run, rows, model.input_size))
+            crops = read_crops(run, rows, model.input_size, drive_root=drive_root)
+            crop_probability[rows] = model.predict_proba(crops)
     probability, raw_label = fuse_scores(
         model, segments["features"], has_crop, crop_probability, classify.crop_probability_clip
     )
