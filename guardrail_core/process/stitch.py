@@ -1,11 +1,11 @@
 """Join the parts of the processing tiles into one run folder, as the tiles end.
 
-Segments get drive-wide numbers (tile by tile, in each tile's order), the points' segments
-are written per drive tile (``points/DDDDDD.npz``) and the crops'
-embeddings are appended to the run's ``embeddings.npy`` as each part is joined, so that this
-process holds neither (a 3 km drive has 165 MB of embeddings; a survey day some GB). Each
-part's guardrail points go to the reconstruction's :class:`~.run_stream.RunStream` as it is
-joined (:meth:`PartStitcher.add` says which parts were).
+Segments get drive-wide numbers (tile by tile, in each tile's order), the points' segments are
+written per drive tile (``points/DDDDDD.npz``) and the crops' embeddings are appended to the
+run's ``embeddings.npy`` as each part is joined, so that this process holds neither (a 3 km
+drive has 165 MB of embeddings; a survey day some GB). Each part's guardrail points go to the
+reconstruction's :class:`~.run_stream.RunStream` as it is joined (:meth:`PartStitcher.add`
+says which parts were).
 """
 
 from __future__ import annotations
