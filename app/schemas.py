@@ -58,6 +58,7 @@ MAX_SEGMENT_ID = 2**53
 SegmentId = Annotated[int, Field(ge=-MAX_SEGMENT_ID, le=MAX_SEGMENT_ID), NOT_A_SWITCH]
 
 JPEG = file_response(["image/jpeg"], "The image (JPEG)")
+PNG = file_response(["image/png"], "The image (PNG)")
 NOT_FOUND = error_response(404, "No such object (the detail names it)")
 CONFLICT = error_response(409, "The state does not allow it now (the detail says why)")
 UNAUTHORIZED = error_response(401, "The server needs its token (Authorization: Bearer or ?token=)")
@@ -213,8 +214,21 @@ class SegmentDetail(Segment):
     """One segment with its camera image, rectangle and latest label history."""
 
     image: str | None = Field(description="the camera image of its crop")
+    image_id: int | None = Field(
+        description="that image's id (GET /api/images/{image_id}/overlay); null without one"
+    )
     rect: list[int] = Field(description="x0, y0, x1, y1 of its crop in that image, pixels")
     history: list[HistoryEntry] = Field(description="newest first, at most 20")
+
+
+class Picked(ResponseModel):
+    """The segment at a pixel of a camera image."""
+
+    image: int = Field(description="the image's id")
+    segment: int | None = Field(
+        description="the segment whose point nearest the camera lies within a few pixels; null "
+        "where none does"
+    )
 
 
 class SegmentPage(ResponseModel):

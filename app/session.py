@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from app.image_overlay import ImageOverlay
 from app.model_registry import ModelRegistry
 from app.segment_index import SegmentIndex
 from guardrail_core.errors import InvalidOptionError, RunFolderError
@@ -97,6 +98,8 @@ class ReviewSession:
         self.index = SegmentIndex(self.run.point_segment, len(self.run))
         # Crops are cut from the drive's images on request; a gallery page mostly asks a few.
         self.crops = RunCrops(self.run, self.drive.root, keep_images=CROP_IMAGES_KEPT)
+        # The camera images with the points on them (the run's points never change).
+        self.overlay = ImageOverlay(self.drive, self.run.point_segment, self.crops.params)
         self.models = ModelRegistry(self.review_dir / MODELS_DIR, self.run, model_dir)
         self.truth: np.ndarray | None = None  # (S,) bool, synthetic drives only
         if self.drive.truth is not None:

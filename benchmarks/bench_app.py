@@ -29,6 +29,12 @@ on a viser server of a free local port (8700 and up):
 4. **Live re-run of one unit model** (target < 250 ms): ``RunTuner(run).retune(run_id, params)``
    for every reconstructed run, the sliders moved a little on each repeat; the time includes
    rebuilding the run's mesh. Skipped, with a note, when the run has no ``reconstruction/``.
+5. **The camera image with the labels on it** (target < 300 ms): ``GET
+   /api/images/{id}/overlay?segment=S`` through FastAPI's TestClient, for the chosen images of
+   ``--repeats`` segments spread along the drive, each image asked for the first time (its
+   points projected, drawn, the PNG encoded), then again (its projection kept). With it, for
+   comparison, ``GET /api/segments/{id}/crop.jpg`` of those segments (the crop cut from the
+   drive's image).
 
 Nothing is written into the drive or the run folder (relabelling writes only the label store;
 training keeps the model in memory; no model is activated).
@@ -74,6 +80,7 @@ TARGET_RELABEL_S = 0.1
 TARGET_SCENE_S = 3.0
 TARGET_RETRAIN_S = 20.0
 TARGET_RETUNE_S = 0.25
+TARGET_OVERLAY_S = 0.3
 RETRAIN_CROPS = 2_000
 WINDOW_M = 100.0
 POINT_BUDGET = 400_000
@@ -271,6 +278,38 @@ def bench_retrain(session: ReviewSession, repeats: int) -> dict[str, Any]:
 # -- 4. live re-run ----------------------------------------------------------------------------
 
 
+def bench_overlay(session: ReviewSession, repeats: int) -> dict[str, Any]:
+    """The camera image with the labels on it, through the REST API: first asks, asked again,
+    and the segments' crops for comparison."""
+    seg = session.run.segments
+    ok = np.flatnonzero(seg["crop_status"] == 0)
+    chosen: list[int] = []
+    seen: set[int] = set()
+    for s in ok[np.linspace(0, len(ok) - 1, 4 * repeats).astype(int)]:
+        if int(seg["image"][s]) not in seen and len(chosen) < repeats:
+            chosen.append(int(s))
+            seen.add(int(seg["image"][s]))
+    first, again, crops = [], [], []
+    with TestClient(create_app(session)) as client:
+
+        def get(url: str) -> float:
+            seconds, response = timed(client.get, url)
+            response.raise_for_status()
+            return seconds
+
+        for s in chosen:
+            url = f"/api/images/{int(seg['image'][s])}/overlay?segment={s}"
+            first.append(get(url))
+            again.append(get(url))
+            crops.append(get(f"/api/segments/{s}/crop.jpg"))
+    return {
+        "images": len(chosen),
+        "first": summary(first),
+        "again": summary(again),
+        "crop": summary(crops),
+    }
+
+
 def slider_params(base: ReconstructionParams, step: int) -> ReconstructionParams:
     """Thresholds an operator might try: every repeat moves the sliders a little."""
     factor = 1.0 + 0.05 * ((step % 3) - 1)
@@ -362,6 +401,17 @@ def print_table(result: dict[str, Any]) -> None:
     if a["what"] == "train_on_set":
         name = f"retrain fast: train_on_set, run x{a['copies']} ({a['crops']:,} crops)"
         rows.append(timing_row(name, a, TARGET_RETRAIN_S))
+    ov = result["overlay"]
+    rows.append(
+        timing_row(
+            f"camera image with labels, first ask (x{ov['images']} images)",
+            ov["first"],
+            TARGET_OVERLAY_S,
+            strict=True,
+        )
+    )
+    rows.append(timing_row("camera image with labels, asked again", ov["again"]))
+    rows.append(timing_row("crop.jpg, cut from the drive's image (comparison)", ov["crop"]))
     rt = result["retune"]
     if "skipped" in rt:
         rows.append(("re-run one unit model (RunTuner.retune)", "skipped", "", "", ""))
@@ -435,6 +485,7 @@ def main() -> int:
             relabel_rest = bench_relabel_rest(session, segment, args.relabels)
             retrain = bench_retrain(session, args.repeats)
             retune = bench_retune(session.run.root, args.repeats)
+            overlay = bench_overlay(session, args.repeats)
         finally:
             if server is not None:
                 server.stop()
@@ -454,11 +505,13 @@ def main() -> int:
         "relabel_rest": relabel_rest,
         "retrain": retrain,
         "retune": retune,
+        "overlay": overlay,
         "targets": {
             "relabel_s": TARGET_RELABEL_S,
             "scene_s": TARGET_SCENE_S,
             "retrain_2000_crops_s": TARGET_RETRAIN_S,
             "retune_s": TARGET_RETUNE_S,
+            "overlay_s": TARGET_OVERLAY_S,
         },
         "verdicts": {
             "relabel": verdict(relabel["median_s"], TARGET_RELABEL_S),
@@ -467,6 +520,7 @@ def main() -> int:
             "retune": "skipped"
             if "skipped" in retune
             else verdict(retune["slowest_median_s"], TARGET_RETUNE_S, strict=True),
+            "overlay": verdict(overlay["first"]["median_s"], TARGET_OVERLAY_S, strict=True),
         },
     }
     if args.json:

@@ -21,6 +21,7 @@ from guardrail_core.reconstruct.pipeline import ReconstructionParams
 #: Routes that send a file, and its media types.
 FILE_ROUTES = {
     ("get", "/api/segments/{segment_id}/crop.jpg"): {"image/jpeg"},
+    ("get", "/api/images/{image_id}/overlay"): {"image/png"},
     ("get", "/api/downloads/{name}"): set(MEDIA_TYPES.values()),
 }
 
@@ -52,6 +53,7 @@ FIELDS_THE_PAGES_READ: dict[tuple[str, str], list[str]] = {
     ],
     ("get", "/api/segments/{segment_id}"): [
         "id",
+        "image_id",
         "crop_url",
         "crop_status",
         "label",
@@ -81,6 +83,7 @@ FIELDS_THE_PAGES_READ: dict[tuple[str, str], list[str]] = {
         "items[].reason",
     ],
     ("get", "/api/selection"): ["segments"],
+    ("get", "/api/images/{image_id}/pick"): ["segment"],
     ("put", "/api/selection"): ["segments"],
     ("put", "/api/segments/{segment_id}/label"): ["segments[].id", "changed_points"],
     ("post", "/api/labels/batch"): ["segments[].id", "segments[].label", "changed_points"],

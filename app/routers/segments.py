@@ -66,6 +66,7 @@ def get_segment(session: Session, segment_id: int) -> dict[str, Any]:
     points = session.index.points_of([s])
     row.update(
         image=session.run.info.images[image] if image >= 0 else None,
+        image_id=image if image >= 0 else None,
         rect=[int(v) for v in session.run.segments["rect"][s]],
         history=session.store.history(points=points, limit=20),
     )

@@ -27,6 +27,8 @@ const state = {
   pollBusy: false,
   job: null, // {id, result} of the last fine-tuning job
   lastRefresh: 0,
+  showCamera: true, // the camera image with the labels on it (key i)
+  labelsVersion: 0, // bumped after every change: the camera image's colours follow the labels
 };
 
 // Actions (label, undo, next, train, activate) run one after the other.
@@ -240,6 +242,8 @@ function renderDetail() {
     missing.hidden = false;
   }
 
+  renderCamera(d);
+
   setLabelChip($("selected-label"), d.label);
   $("selected-reviewed").textContent = d.reviewed ? "✓ reviewed" : "not yet";
   $("selected-reviewed").dataset.reviewed = String(Boolean(d.reviewed));
@@ -263,6 +267,42 @@ function renderDetail() {
   $("selected-crop-status").textContent = CROP_STATUS_TEXT[d.crop_status] ?? d.crop_status ?? "—";
 
   renderHistory(d.history || []);
+}
+
+/** The segment's camera image with every point on it coloured by label (key i hides it). */
+function renderCamera(d) {
+  const figure = $("camera-figure");
+  const img = $("camera-overlay");
+  const show = state.showCamera && d.image_id !== null && d.image_id !== undefined;
+  figure.hidden = !show;
+  if (!show) return;
+  const url = `/api/images/${d.image_id}/overlay${api.query({ segment: d.id, v: state.labelsVersion })}`;
+  const src = api.imageUrl(url);
+  if (img.getAttribute("src") !== src) {
+    img.dataset.loaded = "false";
+    img.src = src;
+  }
+  img.dataset.image = String(d.image_id);
+}
+
+/** A click on the camera image selects the segment of the point there. */
+async function pickOnCamera(event) {
+  const img = $("camera-overlay");
+  if (!img.naturalWidth || !img.clientWidth) return;
+  const x = (event.offsetX * img.naturalWidth) / img.clientWidth;
+  const y = (event.offsetY * img.naturalHeight) / img.clientHeight;
+  const res = await api.get(`/api/images/${img.dataset.image}/pick${api.query({ x, y })}`);
+  if (res.segment === null) {
+    toast("no segment there: click on a point");
+    return;
+  }
+  await selectSegments([res.segment]);
+}
+
+function toggleCamera() {
+  state.showCamera = !state.showCamera;
+  if (state.detail) renderCamera(state.detail);
+  else $("camera-figure").hidden = !state.showCamera;
 }
 
 function renderHistory(history) {
@@ -389,6 +429,7 @@ async function undo() {
 
 // After anything that changes labels: refresh what shows them.
 async function afterChange() {
+  state.labelsVersion += 1;
   await Promise.all([loadDetail(), loadQueue(), loadInfo()]);
 }
 
@@ -557,6 +598,9 @@ function onKeyDown(event) {
     case "n":
       run(nextInQueue);
       break;
+    case "i":
+      toggleCamera();
+      break;
     default:
       return;
   }
@@ -595,6 +639,10 @@ async function init() {
   });
   setFocusHint(!document.hasFocus());
 
+  $("camera-overlay").addEventListener("click", (e) => run(() => pickOnCamera(e)));
+  $("camera-overlay").addEventListener("load", (e) => {
+    e.target.dataset.loaded = "true";
+  });
   $("help-button").addEventListener("click", () => setHelp(true));
   $("help-close").addEventListener("click", () => setHelp(false));
   $("help").addEventListener("click", (e) => {

@@ -128,7 +128,9 @@ def server(drive_path: Path, run_path: Path, model_path: Path, tmp_path: Path) -
     s.kill()
 
 
-def test_review_app_in_the_browser(server: Server, shots: Path) -> None:
+def test_review_app_in_the_browser(
+    server: Server, shots: Path, drive_path: Path, run_path: Path
+) -> None:
     from playwright.sync_api import expect, sync_playwright
 
     assert CHROMIUM.is_file(), "browser tests need Debian's chromium (make test installs it)"
@@ -174,6 +176,40 @@ def test_review_app_in_the_browser(server: Server, shots: Path) -> None:
         # The 3D view has the new colours: the scene's panel text, sent after them, says so.
         expect(scene).to_contain_text(f"label {flipped} (reviewed)", timeout=WAIT_MS)
         page.screenshot(path=shots / "review.png")
+
+        # The camera image with the labels on it: a click on another segment's point there
+        # selects that segment; i hides the image and shows it again.
+        image = _get(f"{server.url}/api/segments/{s}")["image_id"]
+        target, (x, y) = _point_to_click(drive_path, run_path, image, s)
+        camera = page.locator("#camera-overlay")
+        expect(camera).to_have_attribute(
+            "src", re.compile(rf"/api/images/{image}/overlay\?segment={s}&")
+        )
+        expect(camera).to_have_attribute("data-loaded", "true")
+        natural_w, natural_h, shown_w, shown_h = page.evaluate(
+            "() => { const i = document.getElementById('camera-overlay');"
+            " return [i.naturalWidth, i.naturalHeight, i.clientWidth, i.clientHeight]; }"
+        )
+        done = int(body.get_attribute("data-actions") or 0)
+        with page.expect_response(_api("GET", f"/api/images/{image}/pick")) as answer:
+            camera.click(
+                position={
+                    "x": (x + 0.5) * shown_w / natural_w,
+                    "y": (y + 0.5) * shown_h / natural_h,
+                }
+            )
+        assert answer.value.ok and answer.value.json()["segment"] == target, answer.value.text()
+        expect(body).to_have_attribute("data-actions", str(done + 1), timeout=WAIT_MS)
+        expect(page.locator("#selected-id")).to_have_text(str(target))
+        assert _get(f"{server.url}/api/selection")["segments"] == [target]
+        expect(camera).to_have_attribute("src", re.compile(rf"segment={target}&"))
+        expect(camera).to_have_attribute("data-loaded", "true")
+        page.screenshot(path=shots / "camera.png")
+        page.locator("#selected-id").click()
+        page.keyboard.press("i")
+        expect(page.locator("#camera-figure")).to_be_hidden()
+        page.keyboard.press("i")
+        expect(page.locator("#camera-figure")).to_be_visible()
 
         # A crash of the server loses no label: kill it, start it again, reload.
         server.kill()
@@ -227,6 +263,33 @@ def test_review_app_in_the_browser(server: Server, shots: Path) -> None:
         page.screenshot(path=shots / "gallery.png")
         browser.close()
     assert not errors, errors
+
+
+def _point_to_click(
+    drive_path: Path, run_path: Path, image: int, not_segment: int
+) -> tuple[int, tuple[int, int]]:
+    """A segment other than ``not_segment`` on camera image ``image`` and the pixel of its point
+    nearest the camera, where no other segment's point lies within the pick radius."""
+    import numpy as np
+
+    from app.image_overlay import PICK_RADIUS_PX, ImageOverlay
+    from guardrail_core.extract.crops import CropParams
+    from guardrail_core.formats.drive import load_drive
+    from guardrail_core.formats.run_folder import load_run
+
+    run = load_run(run_path)
+    params = CropParams.from_json(run.info.params["crops"])
+    found = ImageOverlay(load_drive(drive_path), run.point_segment, params).points(image)
+    segments, counts = np.unique(found.segment[found.segment >= 0], return_counts=True)
+    for t in segments[counts >= 20]:
+        if t == not_segment:
+            continue
+        mine = np.flatnonzero(found.segment == t)
+        pixel = found.pixel[mine[np.argmin(found.depth[mine])]]
+        near = ((found.pixel - pixel) ** 2).sum(axis=1) <= (PICK_RADIUS_PX + 3) ** 2
+        if not (near & (found.segment != t) & (found.segment >= 0)).any():
+            return int(t), (int(pixel[0]), int(pixel[1]))
+    raise AssertionError(f"no segment stands clear on image {image}")
 
 
 def _api(method: str, path: str):
