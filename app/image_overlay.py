@@ -2,8 +2,9 @@
 
 The points drawn are those any crop of the image may hold: scanned within the crops' time
 window of the exposure (``params.crops.time_window_s``, §3.2) and within their range of the
-camera (``max_range_m``). They are drawn far to near, so a near point hides the far ones behind
-it, as in the picture; a click picks the nearest-to-the-camera point within a few pixels.
+camera (``max_range_m``). Of the points on a pixel the nearest is drawn, so a near point hides
+the far ones behind it, as in the picture; a click picks the point nearest the camera within a
+few pixels.
 """
 
 from __future__ import annotations
@@ -29,18 +30,21 @@ PICK_RADIUS_PX = 6
 
 @dataclass(frozen=True)
 class ImagePoints:
-    """The points drawn on one image, far to near.
+    """The points of the drive on one image.
 
     Attributes
     ----------
     pixel : (K, 2) int32, column and row of each point on the image
     depth : (K,) float32, metres in front of the camera
     segment : (K,) int32, the point's segment (negative: road -1, off the road -2, not processed -3)
+    front : (F,) int64, ascending: the points nearest the camera at their pixel (one a pixel),
+        which are the ones drawn
     """
 
     pixel: np.ndarray
     depth: np.ndarray
     segment: np.ndarray
+    front: np.ndarray
 
 
 class ImageOverlay:
@@ -75,7 +79,7 @@ class ImageOverlay:
         return camera.width, camera.height
 
     def points(self, image: int) -> ImagePoints:
-        """The points drawn on image ``image`` (0 <= image < len(self)), far to near."""
+        """The points on image ``image`` (0 <= image < len(self))."""
         with self._lock:
             if image in self._kept:
                 self._kept.move_to_end(image)
@@ -96,25 +100,24 @@ class ImageOverlay:
         record = self.drive.images[image]
         picture = np.ascontiguousarray(self.drive.read_image(record))
         found = self.points(image)
-        seg = found.segment
+        front = found.front  # one point a pixel: no pixel is written twice in one pass
+        seg = found.segment[front]
         colour = np.empty((len(seg), 3), np.uint8)
         colour[:] = OFF_ROAD
         colour[seg == -1] = ROAD
         in_segment = seg >= 0
         labels = np.asarray(segment_label, bool)[seg[in_segment]]
         colour[in_segment] = np.where(labels[:, None], GUARDRAIL, OTHER)
-        mine = np.zeros(len(seg), bool) if outline is None else seg == outline
-        colour[mine] = SELECTED
+        if outline is not None:
+            colour[seg == outline] = SELECTED
         height, width = picture.shape[:2]
-        for dy in range(DOT_PX):
-            for dx in range(DOT_PX):
-                rows = np.minimum(found.pixel[:, 1] + dy, height - 1)
-                cols = np.minimum(found.pixel[:, 0] + dx, width - 1)
-                # Where points share a pixel the nearest is drawn (they come far to near).
-                flat = (rows * width + cols)[::-1]
-                _, first = np.unique(flat, return_index=True)
-                nearest = len(flat) - 1 - first
-                picture[rows[nearest], cols[nearest]] = colour[nearest]
+        pixel = found.pixel[front]
+        for dy, dx in [(d // DOT_PX, d % DOT_PX) for d in range(DOT_PX**2)][::-1]:
+            # The dots' other pixels first, each point's own pixel last: it keeps its colour.
+            rows = np.minimum(pixel[:, 1] + dy, height - 1)
+            cols = np.minimum(pixel[:, 0] + dx, width - 1)
+            picture[rows, cols] = colour
+        mine = np.zeros(0, bool) if outline is None else found.segment == outline
         if mine.sum() >= 3:
             hull = cv2.convexHull(found.pixel[mine].astype(np.int32))
             cv2.polylines(picture, [hull], True, tuple(int(c) for c in SELECTED), 2, cv2.LINE_AA)
@@ -137,20 +140,45 @@ class ImageOverlay:
         lo, hi = np.searchsorted(
             self._sorted_time, [record.gps_time - window, record.gps_time + window]
         )
-        index = np.arange(lo, hi) if self._by_time is None else self._by_time[lo:hi]
-        xyz = self.drive.points.xyz[index]
-        position = record.T_world_camera[:3, 3]
-        near = ((xyz - position) ** 2).sum(axis=1) < self.params.max_range_m**2
-        index, xyz = index[near], xyz[near]
-        uv, valid = camera.project(xyz, record.T_world_camera)
-        keep = valid & camera.inside(uv)
-        index, uv = index[keep], uv[keep]
-        depth = (xyz[keep] - position) @ record.T_world_camera[:3, 2]
-        order = np.argsort(-depth, kind="stable")
+        if self._by_time is None:  # a slice: no copy of the window's points
+            index, xyz = np.arange(lo, hi), self.drive.points.xyz[lo:hi]
+        else:
+            index = self._by_time[lo:hi]
+            xyz = self.drive.points.xyz[index]
+        # Keep what lies in front, within range and within the lens's field before the
+        # distortion model runs (most of the window does not): depth first, it is one product.
+        rotation = record.T_world_camera[:3, :3]
+        relative = xyz - record.T_world_camera[:3, 3]
+        z = relative @ rotation[:, 2]
+        ahead = (z > 0.1) & (z < self.params.max_range_m)
+        index, local = index[ahead], relative[ahead] @ rotation
+        z = local[:, 2]
+        reach = camera.max_normalised_radius * z
+        keep = (
+            (z > 0.1)
+            & (np.abs(local[:, 0]) <= reach)
+            & (np.abs(local[:, 1]) <= reach)
+            & (np.einsum("ij,ij->i", local, local) < self.params.max_range_m**2)
+        )
+        index, local = index[keep], local[keep]
+        xy = local[:, :2] / local[:, 2:3]
+        lens = np.einsum("ij,ij->i", xy, xy) <= camera.max_normalised_radius**2
+        uv = camera.distort(xy[lens])
+        index, depth = index[lens], local[lens, 2]
+        on = camera.inside(uv)
+        index, uv, depth = index[on], uv[on], depth[on]
+        pixel = np.floor(uv + 0.5).astype(np.int32)
+        # The nearest point of each pixel: one sort by pixel, then depth in millimetres.
+        flat = pixel[:, 1].astype(np.int64) * camera.width + pixel[:, 0]
+        key = (flat << 24) + np.minimum(depth * 1000, 2**24 - 1).astype(np.int64)
+        by_key = np.argsort(key)
+        flat_sorted = flat[by_key]
+        first = np.flatnonzero(np.r_[True, flat_sorted[1:] != flat_sorted[:-1]])
         return ImagePoints(
-            pixel=np.floor(uv[order] + 0.5).astype(np.int32),
-            depth=depth[order].astype(np.float32),
-            segment=np.asarray(self.point_segment[index[order]], np.int32),
+            pixel=pixel,
+            depth=depth.astype(np.float32),
+            segment=np.asarray(self.point_segment[index], np.int32),
+            front=np.sort(by_key[first]),
         )
 
 
