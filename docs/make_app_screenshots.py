@@ -1,5 +1,5 @@
-"""Screenshots of the review app for the README: the 3D scene with a selected segment, and the
-crop gallery.
+"""Screenshots of the review app for the README: the 3D scene with a selected segment, the
+selected segment's panel with its camera image, and the crop gallery.
 
 Serves a drive (default: the demo's) with ``guardrail serve`` on free ports, drives Debian's
 Chromium with Playwright and writes PNGs into ``docs/images/``. Labels go to a temporary review
@@ -58,7 +58,9 @@ def main() -> None:
     parser.add_argument("--drive", type=Path, default=demo / "sample_drive")
     parser.add_argument("--run", type=Path, default=demo / "run")
     parser.add_argument("--model", type=Path, default=demo / "model")
-    parser.add_argument("--segment", type=int, help="segment to select (default: a pipe's)")
+    parser.add_argument(
+        "--segment", type=int, help="segment to select (default: a large, sure guardrail one)"
+    )
     args = parser.parse_args()
 
     port, scene_port = free_port(), free_port()
@@ -73,10 +75,11 @@ def main() -> None:
             url = f"http://127.0.0.1:{port}"
             wait_for(f"{url}/api/info")
             segment = args.segment
-            if segment is None:
-                query = "/api/segments?label=guardrail&crop=true&sort=-probability&limit=1"
+            if segment is None:  # the largest of the surest guardrail segments: it shows well
+                query = "/api/segments?label=guardrail&crop=true&sort=-probability&limit=50"
                 with urllib.request.urlopen(url + query) as response:
-                    segment = json.loads(response.read())["items"][0]["id"]
+                    items = json.loads(response.read())["items"]
+                segment = max(items, key=lambda item: item["n_points"])["id"]
             shoot(url, segment)
         finally:
             server.terminate()
@@ -96,14 +99,16 @@ def shoot(url: str, segment: int) -> None:
         close = scene.locator(".mantine-Notification-closeButton")
         if close.count():
             close.first.click()
+        page.wait_for_selector('#camera-overlay[data-loaded="true"]', timeout=30_000)
         page.screenshot(path=IMAGES / "app_review.png")
+        page.locator("#selection-panel").screenshot(path=IMAGES / "app_camera.png")
 
         page.goto(f"{url}/gallery")
         page.wait_for_selector("#gallery-grid .crop", timeout=30_000)
         time.sleep(3)
         page.screenshot(path=IMAGES / "app_gallery.png")
         browser.close()
-    print(f"wrote {IMAGES}/app_review.png and app_gallery.png")
+    print(f"wrote {IMAGES}/app_review.png, app_camera.png and app_gallery.png")
 
 
 if __name__ == "__main__":
