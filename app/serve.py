@@ -136,7 +136,6 @@ def serve(
         server,
         window_m=window_m,
         point_budget=point_budget,
-        labelling=token is None,
         jobs=jobs,
     )
     app = create_app(

@@ -3,9 +3,10 @@
 The scene shows a window of the drive (points within a budget, coloured by label, prediction,
 probability or truth), the trajectory, the cameras, and the reconstructed guardrails. A click
 picks the segment under the cursor (the server finds it from the click ray: viser has no
-per-point picking), a rectangle (shift + drag) picks many. The GUI shows the selection's crop and
-probability, labels it (keys G, O, shift+G / shift+O for the whole connected run, Z to undo, N for
-the next in the review queue), and tunes the reconstruction thresholds live.
+per-point picking), a rectangle (shift + drag) picks many. The GUI owns the view (colours, the
+window along the drive) and the reconstruction's thresholds, tuned live; labelling and the review
+queue belong to the page beside it (one control for one action), which shows the selection's
+crop, camera image and history.
 """
 
 from __future__ import annotations
@@ -25,14 +26,15 @@ from app.scene.colours import COLOUR_MODES, point_colours
 from app.scene.picking import in_rectangle, pick_along_ray, project_to_screen
 from app.scene.tuning import TUNABLE, RunTuner, slider_value, with_value
 from app.scene.window import window_points
-from app.segment_views import review_queue
-from app.session import CROP_PX, ReviewSession
-from guardrail_core.errors import GuardrailError, MissingDriveFileError, RunFolderError
+from app.session import ReviewSession
+from guardrail_core.errors import GuardrailError, RunFolderError
 from guardrail_core.io.meshes import run_file_stem
 from guardrail_core.reconstruct.assemble import run_mesh
 from guardrail_core.reconstruct.pipeline import ReconstructionParams
 from guardrail_core.sensors.track import track_coordinates
 
+#: The selection panel without a selection: picking is the scene's, labelling the page's.
+NO_SELECTION = "Click a point to select its segment (shift + drag: many); label it on the page."
 #: Mesh colours: the reconstruction, a retuned run, and the ghost of its previous mesh.
 MESH_COLOUR = (230, 230, 235)
 TUNED_COLOUR = (60, 200, 120)
@@ -53,8 +55,6 @@ class ReviewScene:
     server : the viser server to build on
     window_m : metres of trajectory shown at once
     point_budget : the most points sent to the browser
-    labelling : offer labelling in the 3D GUI (off when the API needs a token: viser's own port
-        has no token check, so labels then change only through the API)
     jobs : where "apply to the whole drive" runs the reconstruction
     """
 
@@ -65,7 +65,6 @@ class ReviewScene:
         *,
         window_m: float = 100.0,
         point_budget: int = 400_000,
-        labelling: bool = True,
         jobs: JobRunner | None = None,
     ) -> None:
         self.session = session
@@ -73,7 +72,6 @@ class ReviewScene:
         self.server = server
         self.window_m = float(window_m)
         self.point_budget = int(point_budget)
-        self.labelling = labelling
         drive = session.drive
         track = track_coordinates(drive.points.xyz, drive.points.gps_time, drive.trajectory)
         self.station = track.station  # (N,) metres along the trajectory
@@ -335,37 +333,7 @@ class ReviewScene:
         forward.on_click(lambda _: self.step(+1))
 
         with gui.add_folder("Selection"):
-            self._selection_text = gui.add_markdown("Click a point to select its segment.")
-            self._crop = gui.add_image(np.zeros((8, 8, 3), np.uint8), label="crop", format="jpeg")
-            if self.labelling:
-                guardrail = gui.add_button("Guardrail (G)", color="orange")
-                other = gui.add_button("Other (O)", color="gray")
-                whole = gui.add_button("Whole run: guardrail (shift+G)")
-                undo = gui.add_button("Undo (Z)")
-            queue_next = gui.add_button("Next in queue (N)")
-
-        queue_next.on_click(lambda _: self.next_in_queue())
-        gui.add_command("Next in the review queue", hotkey="N").on_trigger(
-            lambda _: self.next_in_queue()
-        )
-        if self.labelling:
-            guardrail.on_click(lambda _: self.label_selection("guardrail"))
-            other.on_click(lambda _: self.label_selection("other"))
-            whole.on_click(lambda _: self.label_selection("guardrail", expand="component"))
-            undo.on_click(lambda _: self.undo())
-            gui.add_command("Label the selection guardrail", hotkey="G").on_trigger(
-                lambda _: self.label_selection("guardrail")
-            )
-            gui.add_command("Label the selection other", hotkey="O").on_trigger(
-                lambda _: self.label_selection("other")
-            )
-            gui.add_command(
-                "Label the whole run guardrail", hotkey="G", modifier="shift"
-            ).on_trigger(lambda _: self.label_selection("guardrail", expand="component"))
-            gui.add_command("Label the whole run other", hotkey="O", modifier="shift").on_trigger(
-                lambda _: self.label_selection("other", expand="component")
-            )
-            gui.add_command("Undo the last label", hotkey="Z").on_trigger(lambda _: self.undo())
+            self._selection_text = gui.add_markdown(NO_SELECTION)
 
         with gui.add_folder("Reconstruction", expand_by_default=False):
             self._run_choice = gui.add_dropdown("Guardrail run", ("none",), initial_value="none")
@@ -395,7 +363,7 @@ class ReviewScene:
     def _show_selection(self) -> None:
         session = self.session
         if len(session.selection) == 0:
-            self._selection_text.content = "Click a point to select its segment."
+            self._selection_text.content = NO_SELECTION
             return
         s = int(session.selection[0])
         seg = session.run.segments
@@ -407,27 +375,9 @@ class ReviewScene:
             f"**Segment {s}**{more}  \n"
             f"probability {'—' if np.isnan(p) else f'{100 * p:.1f}%'} · "
             f"raw {'guardrail' if seg['raw_label'][s] else 'other'}  \n"
-            f"label **{label}** ({reviewed}) · {int(seg['n_points'][s])} points"
+            f"label **{label}** ({reviewed}) · {int(seg['n_points'][s])} points  \n"
+            "label it on the page beside the scene (g, o)"
         )
-        crop = np.zeros((8, 8, 3), np.uint8)
-        if session.crops.has_crop(s):
-            try:
-                crop = session.crops.cut(np.array([s]), CROP_PX)[0]
-            except MissingDriveFileError:  # the image went from the drive: no crop to show
-                pass
-        self._crop.image = crop
-
-    def label_selection(self, label: str, *, expand: str = "none") -> None:
-        if len(self.session.selection):
-            self.session.relabel(self.session.selection, label, expand=expand)
-
-    def undo(self) -> None:
-        self.session.undo()
-
-    def next_in_queue(self) -> None:
-        rows = review_queue(self.session, 1)
-        if rows:
-            self.session.select([rows[0]["id"]])
 
     # -- tuning -----------------------------------------------------------------------------
 

@@ -156,9 +156,13 @@ def test_review_app_in_the_browser(
         assert _get(f"{server.url}/api/selection")["segments"] == [s]
         expect(scene).to_contain_text(re.compile(rf"Segment {s}\b"), timeout=WAIT_MS)
         assert _get(f"{server.url}/api/info")["scene_clients"] >= 1
+        # One control for one action: labelling and the queue are the page's, not the scene's.
+        for button in ("Guardrail (G)", "Other (O)", "Undo (Z)", "Next in queue"):
+            expect(scene).not_to_contain_text(button)
+        expect(scene).to_contain_text("label it on the page")
 
-        # Relabel with the keyboard. The keys must reach the page, not the 3D iframe: viser's own
-        # G/O hotkeys relabel on the server and leave this page showing the old label.
+        # Relabel with the keyboard. The keys must reach the page, not the 3D iframe (whose
+        # viser panel has no labelling).
         page.locator("#selected-id").click()
         assert page.evaluate("document.activeElement.id") != "scene"
         done = int(body.get_attribute("data-actions") or 0)
