@@ -231,6 +231,32 @@ class Picked(ResponseModel):
     )
 
 
+class HistogramPipe(ResponseModel):
+    """A pipe of the re-run unit model, by where it lies along the unit."""
+
+    kind: str = Field(description="horizontal, vertical, diagonal or curved")
+    x_min_m: float = Field(description="its axis's smallest x, metres along the unit")
+    x_max_m: float = Field(description="its axis's largest x, metres along the unit")
+    radius_m: float
+
+
+class RunHistogram(ResponseModel):
+    """The numbers behind a run's unit-model thresholds (§4.3, Fig. 14): the x histogram of the
+    superimposed points with its threshold and the pipes found, or a beam's section curve."""
+
+    run_id: int
+    type: str = Field(description="pipe or beam")
+    histogram_factor: float = Field(description="the threshold's factor of the median count")
+    bin_m: float = Field(description="the bins' width, metres")
+    x_m: list[float] | None = Field(description="bin centres, metres along the unit (pipes)")
+    counts: list[int] | None = Field(description="superimposed points per bin, poles left out")
+    threshold: float | None = Field(description="points per bin above which vertical pipes lie")
+    pipes: list[HistogramPipe] = Field(description="the pipes found with these thresholds")
+    section: list[list[float]] | None = Field(
+        description="the beam's section curve, [z, y] metres (beams)"
+    )
+
+
 class SegmentPage(ResponseModel):
     """One page of the filtered, sorted segments."""
 

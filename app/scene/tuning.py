@@ -114,10 +114,17 @@ class RunTuner:
             refused earlier, when they are made: :class:`~guardrail_core.params.ParameterError`).
         """
         clock = time.perf_counter()
+        unit = self.unit(run_id, params)
+        mesh = run_mesh(dataclasses.replace(self.run(run_id), model=unit.model), params.sweep)
+        return Retuned(unit, mesh, time.perf_counter() - clock)
+
+    def unit(self, run_id: int, params: ReconstructionParams) -> UnitReconstruction:
+        """The unit model of a run re-run with ``params``, and its x histogram (pipes); the
+        errors of :meth:`retune`."""
         run = self.run(run_id)
         if run.model is None:
             raise KeyError(f"run {run_id} has no unit model to re-run")
-        unit = reconstruct_unit(
+        return reconstruct_unit(
             self.points(run_id),
             run.model.length,
             pole_radius=run.model.pole_radius,
@@ -125,5 +132,3 @@ class RunTuner:
             n_units=run.model.n_units,
             params=params,
         )
-        mesh = run_mesh(dataclasses.replace(run, model=unit.model), params.sweep)
-        return Retuned(unit, mesh, time.perf_counter() - clock)
