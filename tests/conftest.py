@@ -2,13 +2,20 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import pytest
 
 from guardrail_core.formats.drive import Drive, load_drive
 from guardrail_core.synth.scene import load_scene_spec
 from guardrail_core.synth.simulate import SimulationOptions, simulate_drive
+
+if TYPE_CHECKING:  # the app's modules load FastAPI and viser: only where a test asks for them
+    from fastapi.testclient import TestClient
+
+    from app.session import ReviewSession
 
 TEST_SEED = 11
 #: Default camera resolution: thin pipes need it for the projection test (see test_simulate).
@@ -53,3 +60,28 @@ def run_path(drive: Drive, model_path: Path, tmp_path_factory: pytest.TempPathFa
     out = tmp_path_factory.mktemp("runs") / "run"
     process_drive(drive, load_model(model_path), out)
     return out
+
+
+@pytest.fixture(scope="module")
+def module_session(
+    drive_path: Path, run_path: Path, tmp_path_factory: pytest.TempPathFactory
+) -> Iterator[ReviewSession]:
+    """A review session on a copy of the test run, shared by one module's tests (for tests
+    that change nothing the others see)."""
+    from tests.app_fixtures import copy_run, new_session
+
+    tmp = tmp_path_factory.mktemp("session")
+    session = new_session(drive_path, copy_run(run_path, tmp), tmp / "review")
+    yield session
+    session.close()
+
+
+@pytest.fixture(scope="module")
+def module_client(module_session: ReviewSession) -> Iterator[TestClient]:
+    """The review app's API on :func:`module_session`."""
+    from fastapi.testclient import TestClient
+
+    from app.main import create_app
+
+    with TestClient(create_app(module_session)) as client:
+        yield client

@@ -3,35 +3,13 @@ segment on it (``GET /api/images/{id}/pick``), on the test drive's run."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from pathlib import Path
-
 import cv2
 import numpy as np
-import pytest
 from fastapi.testclient import TestClient
 
 from app.image_overlay import PICK_RADIUS_PX
-from app.main import create_app
 from app.scene.colours import GUARDRAIL, OTHER, SELECTED
 from app.session import ReviewSession
-from tests.app_fixtures import copy_run, new_session
-
-
-@pytest.fixture(scope="module")
-def session(
-    drive_path: Path, run_path: Path, tmp_path_factory: pytest.TempPathFactory
-) -> Iterator[ReviewSession]:
-    tmp = tmp_path_factory.mktemp("images")
-    s = new_session(drive_path, copy_run(run_path, tmp), tmp / "review")
-    yield s
-    s.close()
-
-
-@pytest.fixture(scope="module")
-def client(session: ReviewSession) -> Iterator[TestClient]:
-    with TestClient(create_app(session)) as c:
-        yield c
 
 
 def _png(response) -> np.ndarray:  # type: ignore[no-untyped-def]
@@ -59,80 +37,90 @@ def _clear_segment(session: ReviewSession) -> tuple[int, int, np.ndarray]:
     raise AssertionError("no segment stands clear on its image")
 
 
-def test_the_segment_detail_names_its_image(client: TestClient, session: ReviewSession) -> None:
-    s, image, _ = _clear_segment(session)
-    detail = client.get(f"/api/segments/{s}").json()
+def test_the_segment_detail_names_its_image(
+    module_client: TestClient, module_session: ReviewSession
+) -> None:
+    s, image, _ = _clear_segment(module_session)
+    detail = module_client.get(f"/api/segments/{s}").json()
     assert detail["image_id"] == image
-    assert detail["image"] == session.run.info.images[image]
-    without = int(np.flatnonzero(session.run.segments["image"] < 0)[0])
-    assert client.get(f"/api/segments/{without}").json()["image_id"] is None
+    assert detail["image"] == module_session.run.info.images[image]
+    without = int(np.flatnonzero(module_session.run.segments["image"] < 0)[0])
+    assert module_client.get(f"/api/segments/{without}").json()["image_id"] is None
 
 
-def test_every_point_of_the_chosen_image_s_segment_is_drawn(session: ReviewSession) -> None:
+def test_every_point_of_the_chosen_image_s_segment_is_drawn(module_session: ReviewSession) -> None:
     """The chosen image holds all its segment's points (§3.2), so the overlay draws them all."""
-    seg = session.run.segments
-    drive = session.drive
+    seg = module_session.run.segments
+    drive = module_session.drive
     ok = np.flatnonzero(seg["crop_status"] == 0)
     checked = 0
     for s in ok[:: max(1, len(ok) // 40)]:
         image = int(seg["image"][s])
         position = drive.images[image].T_world_camera[:3, 3]
-        points = drive.points.xyz[session.run.point_segment == s]
-        if np.linalg.norm(points - position, axis=1).max() >= session.crops.params.max_range_m:
+        points = drive.points.xyz[module_session.run.point_segment == s]
+        if (
+            np.linalg.norm(points - position, axis=1).max()
+            >= module_session.crops.params.max_range_m
+        ):
             continue  # a point beyond the crops' range: left out by design
-        assert (session.overlay.points(image).segment == s).sum() == seg["n_points"][s]
+        assert (module_session.overlay.points(image).segment == s).sum() == seg["n_points"][s]
         checked += 1
     assert checked >= 20
 
 
 def test_the_overlay_colours_points_by_label_and_outlines_the_segment(
-    client: TestClient, session: ReviewSession
+    module_client: TestClient, module_session: ReviewSession
 ) -> None:
-    s, image, (x, y) = _clear_segment(session)
-    width, height = session.overlay.size(image)
-    plain = _png(client.get(f"/api/images/{image}/overlay"))
-    outlined = _png(client.get(f"/api/images/{image}/overlay", params={"segment": s}))
+    s, image, (x, y) = _clear_segment(module_session)
+    width, height = module_session.overlay.size(image)
+    plain = _png(module_client.get(f"/api/images/{image}/overlay"))
+    outlined = _png(module_client.get(f"/api/images/{image}/overlay", params={"segment": s}))
     assert plain.shape == outlined.shape == (height, width, 3)
-    label = GUARDRAIL if session.effective_label()[s] else OTHER
+    label = GUARDRAIL if module_session.effective_label()[s] else OTHER
     # PNG is lossless: the segment's front point has its label's colour, then the outline's.
     np.testing.assert_array_equal(plain[y, x], label)
     np.testing.assert_array_equal(outlined[y, x], SELECTED)
-    drawn = int((session.overlay.points(image).segment == s).sum())
+    drawn = int((module_session.overlay.points(image).segment == s).sum())
     assert (outlined == SELECTED).all(axis=2).sum() > drawn  # its points and its hull
     assert not (plain == SELECTED).all(axis=2).any()
-    photo = session.drive.read_image(session.drive.images[image])
+    photo = module_session.drive.read_image(module_session.drive.images[image])
     assert (plain != photo).any(axis=2).mean() > 0.01  # points drawn on the photo
 
 
-def test_a_click_on_a_point_picks_its_segment(client: TestClient, session: ReviewSession) -> None:
-    s, image, (x, y) = _clear_segment(session)
-    answer = client.get(f"/api/images/{image}/pick", params={"x": x + 1.5, "y": y - 1.5})
+def test_a_click_on_a_point_picks_its_segment(
+    module_client: TestClient, module_session: ReviewSession
+) -> None:
+    s, image, (x, y) = _clear_segment(module_session)
+    answer = module_client.get(f"/api/images/{image}/pick", params={"x": x + 1.5, "y": y - 1.5})
     assert answer.status_code == 200 and answer.json() == {"image": image, "segment": s}
     # The pixel farthest from any segment's point picks nothing.
-    found = session.overlay.points(image)
-    width, height = session.overlay.size(image)
+    found = module_session.overlay.points(image)
+    width, height = module_session.overlay.size(image)
     free = np.ones((height, width), np.uint8)
     ours = found.segment >= 0
     free[found.pixel[ours, 1], found.pixel[ours, 0]] = 0
     field = cv2.distanceTransform(free, cv2.DIST_L2, 5)
     row, col = np.unravel_index(np.argmax(field), field.shape)
     assert field[row, col] > PICK_RADIUS_PX + 1
-    empty = client.get(f"/api/images/{image}/pick", params={"x": col, "y": row}).json()
+    empty = module_client.get(f"/api/images/{image}/pick", params={"x": col, "y": row}).json()
     assert empty == {"image": image, "segment": None}
 
 
 def test_bad_images_segments_and_pixels_are_refused(
-    client: TestClient, session: ReviewSession
+    module_client: TestClient, module_session: ReviewSession
 ) -> None:
-    n = len(session.drive.images)
+    n = len(module_session.drive.images)
     for url in (
         f"/api/images/{n}/overlay",
         "/api/images/-1/overlay",
         f"/api/images/{n}/pick?x=1&y=1",
     ):
-        assert client.get(url).status_code == 404, url
-    assert client.get(f"/api/images/0/overlay?segment={len(session.run)}").status_code == 404
-    width, height = session.overlay.size(0)
+        assert module_client.get(url).status_code == 404, url
+    assert (
+        module_client.get(f"/api/images/0/overlay?segment={len(module_session.run)}").status_code
+        == 404
+    )
+    width, height = module_session.overlay.size(0)
     for query in (f"x={width}&y=1", f"x=1&y={height}", "x=-1&y=1", "x=a&y=1", "y=1"):
-        assert client.get(f"/api/images/0/pick?{query}").status_code == 422, query
-    assert client.get("/api/images/zero/overlay").status_code == 422
+        assert module_client.get(f"/api/images/0/pick?{query}").status_code == 422, query
+    assert module_client.get("/api/images/zero/overlay").status_code == 422

@@ -3,45 +3,24 @@ on the test drive's reconstructed run."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from pathlib import Path
-
 import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from app.main import create_app
 from app.scene.tuning import RunTuner
 from app.session import ReviewSession
-from tests.app_fixtures import copy_run, new_session
-
-
-@pytest.fixture(scope="module")
-def session(
-    drive_path: Path, run_path: Path, tmp_path_factory: pytest.TempPathFactory
-) -> Iterator[ReviewSession]:
-    tmp = tmp_path_factory.mktemp("runs")
-    s = new_session(drive_path, copy_run(run_path, tmp), tmp / "review")
-    yield s
-    s.close()
-
-
-@pytest.fixture(scope="module")
-def client(session: ReviewSession) -> Iterator[TestClient]:
-    with TestClient(create_app(session)) as c:
-        yield c
 
 
 def test_a_pipe_run_s_histogram_threshold_and_pipes(
-    client: TestClient, session: ReviewSession
+    module_client: TestClient, module_session: ReviewSession
 ) -> None:
-    tuner = RunTuner(session.run.root)
+    tuner = RunTuner(module_session.run.root)
     pipe_runs = [r for r in tuner.tunable_runs() if r.model and r.model.type == "pipe"]
     assert pipe_runs, "the test street has a reconstructed pipe run"
     run = pipe_runs[0]
     assert run.model is not None
-    before = (session.run.root / "reconstruction" / "models.json").read_bytes()
-    body = client.get(f"/api/runs/{run.run_id}/histogram").json()
+    before = (module_session.run.root / "reconstruction" / "models.json").read_bytes()
+    body = module_client.get(f"/api/runs/{run.run_id}/histogram").json()
     params = tuner.params.pipes
     assert body["type"] == "pipe" and body["histogram_factor"] == params.histogram_factor
     counts = np.array(body["counts"])
@@ -59,7 +38,7 @@ def test_a_pipe_run_s_histogram_threshold_and_pipes(
     np.testing.assert_allclose([x for _, x in found], [x for _, x in stored], atol=1e-4)
 
     # The slider's value: the threshold follows; past the highest bar, no vertical pipe is left.
-    higher = client.get(
+    higher = module_client.get(
         f"/api/runs/{run.run_id}/histogram", params={"histogram_factor": 6.0}
     ).json()
     assert higher["counts"] == body["counts"]
@@ -69,20 +48,20 @@ def test_a_pipe_run_s_histogram_threshold_and_pipes(
     if higher["threshold"] >= counts.max():
         assert not [p for p in higher["pipes"] if p["kind"] == "vertical"]
     # Nothing is written.
-    assert (session.run.root / "reconstruction" / "models.json").read_bytes() == before
+    assert (module_session.run.root / "reconstruction" / "models.json").read_bytes() == before
 
 
 def test_unknown_runs_and_bad_factors_are_refused(
-    client: TestClient, session: ReviewSession
+    module_client: TestClient, module_session: ReviewSession
 ) -> None:
-    tuner = RunTuner(session.run.root)
+    tuner = RunTuner(module_session.run.root)
     missing = max(r.run_id for r in tuner.runs) + 1
-    assert client.get(f"/api/runs/{missing}/histogram").status_code == 404
-    assert client.get("/api/runs/-1/histogram").status_code == 404
+    assert module_client.get(f"/api/runs/{missing}/histogram").status_code == 404
+    assert module_client.get("/api/runs/-1/histogram").status_code == 404
     run_id = tuner.tunable_runs()[0].run_id
     for factor in ("0.5", "6.5", "nan", "x"):
-        answer = client.get(f"/api/runs/{run_id}/histogram?histogram_factor={factor}")
+        answer = module_client.get(f"/api/runs/{run_id}/histogram?histogram_factor={factor}")
         assert answer.status_code == 422, factor
     without = [r for r in tuner.runs if r.model is None]
     if without:
-        assert client.get(f"/api/runs/{without[0].run_id}/histogram").status_code == 404
+        assert module_client.get(f"/api/runs/{without[0].run_id}/histogram").status_code == 404
