@@ -301,8 +301,7 @@ async function pickOnCamera(event) {
 
 function toggleCamera() {
   state.showCamera = !state.showCamera;
-  if (state.detail) renderCamera(state.detail);
-  else $("camera-figure").hidden = !state.showCamera;
+  if (state.detail) renderCamera(state.detail); // without a selection there is no image
 }
 
 function renderHistory(history) {
@@ -618,6 +617,7 @@ function refreshOnReturn() {
   const now = Date.now();
   if (now - state.lastRefresh < 2000) return;
   state.lastRefresh = now;
+  state.labelsVersion += 1; // the gallery may have relabelled points on the camera image
   Promise.all([loadDetail(), loadQueue(), loadInfo()]).catch(() => {});
 }
 
