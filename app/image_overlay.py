@@ -16,9 +16,10 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from app.run_tiles import RunTiles
 from app.scene.colours import GUARDRAIL, OFF_ROAD, OTHER, ROAD, SELECTED
 from guardrail_core.extract.crops import CropParams
-from guardrail_core.formats.drive import Drive
+from guardrail_core.formats.drive import DriveSource
 
 #: Projections kept (an operator looks at a few images in turn).
 PROJECTIONS_KEPT = 4
@@ -52,21 +53,17 @@ class ImageOverlay:
 
     Parameters
     ----------
-    drive : the drive, its points in memory
-    point_segment : (N,) int32, the run's segment of every drive point
+    drive : the drive (its images and cameras)
+    tiles : its points and the run's segments, read from the tiles the images need
     crops : the run's crop parameters (which points an image may show)
 
     Thread-safe: the app's request threads share one.
     """
 
-    def __init__(self, drive: Drive, point_segment: np.ndarray, crops: CropParams) -> None:
+    def __init__(self, drive: DriveSource, tiles: RunTiles, crops: CropParams) -> None:
         self.drive = drive
-        self.point_segment = point_segment
+        self.tiles = tiles
         self.params = crops
-        gps_time = drive.points.gps_time
-        # Mobile-mapping points come in time order; sort only where they do not.
-        self._by_time = None if np.all(np.diff(gps_time) >= 0) else np.argsort(gps_time)
-        self._sorted_time = gps_time if self._by_time is None else gps_time[self._by_time]
         self._kept: OrderedDict[int, ImagePoints] = OrderedDict()
         self._lock = threading.Lock()
 
@@ -137,14 +134,8 @@ class ImageOverlay:
         record = self.drive.images[image]
         camera = self.drive.cameras[record.camera]
         window = self.params.time_window_s
-        lo, hi = np.searchsorted(
-            self._sorted_time, [record.gps_time - window, record.gps_time + window]
-        )
-        if self._by_time is None:  # a slice: no copy of the window's points
-            index, xyz = np.arange(lo, hi), self.drive.points.xyz[lo:hi]
-        else:
-            index = self._by_time[lo:hi]
-            xyz = self.drive.points.xyz[index]
+        scanned = self.tiles.scanned_between(record.gps_time - window, record.gps_time + window)
+        index, xyz = np.arange(len(scanned)), scanned.xyz
         # Keep what lies in front, within range and within the lens's field before the
         # distortion model runs (most of the window does not): depth first, it is one product.
         rotation = record.T_world_camera[:3, :3]
@@ -177,7 +168,7 @@ class ImageOverlay:
         return ImagePoints(
             pixel=pixel,
             depth=depth.astype(np.float32),
-            segment=np.asarray(self.point_segment[index], np.int32),
+            segment=np.asarray(scanned.segment[index], np.int32),
             front=np.sort(by_key[first]),
         )
 

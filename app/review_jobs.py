@@ -10,6 +10,8 @@ import numpy as np
 
 from app.session import ReviewSession
 from guardrail_core.extract.classify import ClassifierParams
+from guardrail_core.formats.drive import drive_parts
+from guardrail_core.reconstruct.drive_input import gather_reconstruction_points
 from guardrail_core.reconstruct.pipeline import ReconstructionParams, reconstruct_into
 from guardrail_core.review.training import predict_run, train_from_run, write_predictions
 
@@ -20,14 +22,14 @@ def fine_tune(
     session: ReviewSession, *, mode: str = "fast", include_unreviewed: bool = True
 ) -> Callable[[Report], dict[str, Any]]:
     """A job that trains a model from the store's labels and saves it (not activated)."""
-    point_labels = session.point_labels().copy()  # a snapshot: labelling goes on meanwhile
+    operator_label = session.operator_label.copy()  # a snapshot: labelling goes on meanwhile
     run = session.run
 
     def work(report: Report) -> dict[str, Any]:
         report(0.0, "collecting labels")
         trained = train_from_run(
             run,
-            point_labels,
+            operator_label=operator_label,
             params=ClassifierParams(mode=mode),
             include_unreviewed=include_unreviewed,
             progress_fn=lambda f, m: report(0.95 * f, m),
@@ -75,17 +77,23 @@ def reconstruct(
     label = session.effective_label().copy()
 
     def work(report: Report) -> dict[str, Any]:
-        report(0.05, "reconstructing")
+        report(0.02, "reading the guardrail points")
         drive = session.drive
+        # Only the guardrail points and the road near them, a tile at a time: a survey never whole.
+        xyz, point_segment = gather_reconstruction_points(
+            drive, session.folder, label, params.runs.ground_reach_m
+        )
+        report(0.05, "reconstructing")
         summary = reconstruct_into(
             session.run.root,
-            drive.points.xyz,
-            session.run.point_segment,
+            xyz,
+            point_segment,
             label,
             drive.trajectory.position,
             origin=drive.origin,
             crs=drive.crs,
             params=params,
+            inputs=drive_parts(drive.root),
             on_run=lambda done, runs: report(
                 0.05 + 0.9 * done / max(runs, 1), f"reconstructing: run {done} of {runs}"
             ),

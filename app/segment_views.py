@@ -22,8 +22,10 @@ def segment_rows(session: ReviewSession, ids: np.ndarray) -> list[dict[str, Any]
     """The API's segment objects (see the REST contract in the README)."""
     seg = session.run.segments
     label = session.effective_label()
+    ids = np.asarray(ids, np.int64)
+    truth = session.truth(ids)  # read from the segments' tiles (synthetic drives)
     rows = []
-    for s in np.asarray(ids, np.int64):
+    for k, s in enumerate(ids):
         s = int(s)
         probability = float(seg["probability"][s])
         ok = int(seg["crop_status"][s]) == CROP_OK
@@ -41,7 +43,7 @@ def segment_rows(session: ReviewSession, ids: np.ndarray) -> list[dict[str, Any]
                 "model_label": _name(bool(seg["label"][s])),
                 "label": _name(bool(label[s])),
                 "reviewed": bool(session.operator_label[s] >= 0),
-                "truth": None if session.truth is None else _name(bool(session.truth[s])),
+                "truth": None if truth is None else _name(bool(truth[k])),
             }
         )
     return rows

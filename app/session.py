@@ -4,6 +4,11 @@ the 3D scene and the background jobs.
 Labels are the operators' (per drive point, in the label store); a segment's *effective* label is
 the majority of its operator-labelled points, or the model's (corrected, §3.3) label where no
 operator has looked at it.
+
+The session holds the run's per-segment tables and nothing per drive point: the points, their
+segments and their labels are read for the segments and the windows asked for
+(:mod:`app.run_tiles`, :meth:`LabelStore.labels_at`), so a survey's run opens as fast as a
+street's.
 """
 
 from __future__ import annotations
@@ -18,16 +23,14 @@ import numpy as np
 
 from app.image_overlay import ImageOverlay
 from app.model_registry import ModelRegistry
-from app.segment_index import SegmentIndex
-from guardrail_core.errors import InvalidOptionError, RunFolderError
+from app.run_tiles import RunTiles
+from guardrail_core.errors import InvalidOptionError
 from guardrail_core.extract.classifier_params import ClassifierParams
-from guardrail_core.extract.segment_truth import segment_truth
-from guardrail_core.formats.drive import Drive, load_drive
+from guardrail_core.formats.drive import DriveSource, open_drive
 from guardrail_core.formats.label_store import LABEL_GUARDRAIL, LABEL_OTHER, LabelChange, LabelStore
 from guardrail_core.formats.run_folder import Run
 from guardrail_core.formats.run_folder_paths import RunFolder
 from guardrail_core.review.run_crops import RunCrops
-from guardrail_core.review.training import segment_labels
 
 #: What the review app writes lives in this folder of the drive: labels outlive run folders.
 REVIEW_DIR = "review"
@@ -68,7 +71,7 @@ class ReviewSession:
     ------
     RunFolderError
         ``run_path`` is not a run folder of this format version, or it was made from a drive
-        with another number of points.
+        with another number of points or tiles.
     """
 
     def __init__(
@@ -80,35 +83,28 @@ class ReviewSession:
         operator: str = "operator",
         model_dir: str | Path | None = None,
     ) -> None:
-        self.drive: Drive = load_drive(drive_path)
+        # The drive without its points and the run's tables: the points are read a tile at a
+        # time as a request needs them (a survey's do not fit in memory).
+        self.drive: DriveSource = open_drive(drive_path)
         self.folder = RunFolder.open(run_path)  # every path of the run, its format checked
         self.run: Run = self.folder.load()
-        n = len(self.drive.points)
-        if len(self.run.point_segment) != n:
-            raise RunFolderError(
-                f"{run_path}: made from a drive of {len(self.run.point_segment)} points, but "
-                f"{drive_path} has {n}; serve the run with the drive it was made from"
-            )
+        self.tiles = RunTiles(self.drive, self.folder, self.run.segments["time"])
         self.review_dir = Path(review_dir) if review_dir else self.drive.root / REVIEW_DIR
         self.operator = operator
         self.lock = threading.RLock()
         self.store = LabelStore(
-            self.review_dir / LABELS_FILE, n_points=n, drive_name=self.drive.root.name
+            self.review_dir / LABELS_FILE,
+            n_points=self.tiles.n_points,
+            drive_name=self.drive.root.name,
         )
-        self.index = SegmentIndex(self.run.point_segment, len(self.run))
         # Crops are cut from the drive's images on request; a gallery page mostly asks a few.
         self.crops = RunCrops(self.run, self.drive.root, keep_images=CROP_IMAGES_KEPT)
         # The camera images with the points on them (the run's points never change).
-        self.overlay = ImageOverlay(self.drive, self.run.point_segment, self.crops.params)
+        self.overlay = ImageOverlay(self.drive, self.tiles, self.crops.params)
         self.models = ModelRegistry(self.review_dir / MODELS_DIR, self.run, model_dir)
-        self.truth: np.ndarray | None = None  # (S,) bool, synthetic drives only
-        if self.drive.truth is not None:
-            self.truth = segment_truth(
-                self.drive.truth.point_class, self.run.point_segment, len(self.run)
-            )
-        self.operator_label = segment_labels(
-            self.run.point_segment, len(self.run), self.store.point_labels()
-        )  # (S,) int8: -1 unreviewed
+        self.operator_label = np.full(len(self.run), -1, np.int8)  # (S,) -1 unreviewed
+        segments, label = self.tiles.operator_labels(*self.store.labelled())
+        self.operator_label[segments] = label
         self.selection = np.zeros(0, np.int64)
         self._listeners: list[Listener] = []
 
@@ -122,6 +118,10 @@ class ReviewSession:
         """(S,) bool: the operator's label where reviewed, else the model's corrected label."""
         reviewed = self.operator_label >= 0
         return np.where(reviewed, self.operator_label == 1, self.run.segments["label"])
+
+    def truth(self, segments: Sequence[int] | np.ndarray) -> np.ndarray | None:
+        """(K,) bool simulated truth of ``segments`` (checked ids), or None for a real drive."""
+        return self.tiles.truth(self.check_segments(segments))
 
     def check_segments(self, segments: Sequence[int] | np.ndarray) -> np.ndarray:
         """(K,) int64 segment ids, checked to exist.
@@ -174,7 +174,7 @@ class ReviewSession:
         ids = np.unique(ids)
         with self.lock:
             change = self.store.set_labels(
-                self.index.points_of(ids),
+                self.tiles.points_of(ids),
                 LABEL_VALUES[label],
                 who=who or self.operator,
                 model_version=self.models.active_version,
@@ -190,19 +190,20 @@ class ReviewSession:
             change = self.store.undo(who=who)
             if change is None:
                 return Relabel(None, np.zeros(0, np.int64))
-            ids = self.index.segments_of(change.points)
+            ids = self.tiles.segments_of(change.points)
             self._refresh(ids)
         self.notify("labels", ids)
         return Relabel(change, ids)
 
     def _refresh(self, segments: np.ndarray) -> None:
-        self.operator_label[segments] = self.index.operator_labels(
-            self.store.point_labels(), segments
-        )
+        points = self.tiles.points_of(segments)
+        self.operator_label[segments] = -1
+        labelled, label = self.tiles.operator_labels(points, self.store.labels_at(points))
+        self.operator_label[labelled] = label
 
-    def point_labels(self) -> np.ndarray:
-        """(N,) int8 operator label of every drive point, -1 where none."""
-        return self.store.point_labels()
+    def labels_at(self, points: np.ndarray) -> np.ndarray:
+        """(K,) int8 operator label of each drive point of ``points``, -1 where none."""
+        return self.store.labels_at(points)
 
     def select(self, segments: Sequence[int] | np.ndarray) -> np.ndarray:
         ids = np.unique(self.check_segments(segments))
@@ -241,7 +242,7 @@ class ReviewSession:
         return {
             "drive": str(self.drive.root),
             "run": str(self.run.root),
-            "n_points": len(self.drive.points),
+            "n_points": self.tiles.n_points,
             "n_segments": self.n_segments,
             "reviewed_segments": int((self.operator_label >= 0).sum()),
             "label_counts": counts,

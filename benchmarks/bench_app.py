@@ -46,8 +46,10 @@ import argparse
 import json
 import os
 import platform
+import resource
 import socket
 import statistics
+import subprocess
 import sys
 import tempfile
 import textwrap
@@ -74,13 +76,14 @@ from guardrail_core.extract.segment_head import SegmentHeadParams  # noqa: E402
 from guardrail_core.extract.training import TrainingSet, train_on_set  # noqa: E402
 from guardrail_core.reconstruct.pipeline import ReconstructionParams  # noqa: E402
 from guardrail_core.review.training import train_from_run, training_set_from_run  # noqa: E402
-from guardrail_core.sensors.track import track_coordinates  # noqa: E402
 
 TARGET_RELABEL_S = 0.1
 TARGET_SCENE_S = 3.0
 TARGET_RETRAIN_S = 20.0
 TARGET_RETUNE_S = 0.25
 TARGET_OVERLAY_S = 0.3
+TARGET_FIRST_VIEW_S = 3.0
+TARGET_SERVER_GB = 2.0
 RETRAIN_CROPS = 2_000
 WINDOW_M = 100.0
 POINT_BUDGET = 400_000
@@ -136,12 +139,6 @@ def bench_scene(
         )
         scene_s.append(seconds)
     assert scene is not None and server is not None
-    # What the construction spends on the stations of every point (track coordinates).
-    drive = session.drive
-    track_s = [
-        timed(track_coordinates, drive.points.xyz, drive.points.gps_time, drive.trajectory)[0]
-        for _ in range(repeats)
-    ]
     # Fresh windows: evenly along the drive, none of them the one the scene opened on.
     lo, hi = scene.station_range
     starts = np.linspace(lo, max(lo, hi - WINDOW_M), repeats + 2)[1:-1]
@@ -149,16 +146,15 @@ def bench_scene(
     for start in starts:
         seconds, _ = timed(scene.show_window, float(start))
         window_s.append(seconds)
-        window_points.append(len(scene.points))
+        window_points.append(len(scene.shown))
     scene.show_window(lo)
     return (
         {
             "server_start": summary(server_s),
             "construct": summary(scene_s),
-            "stations": summary(track_s),
             "show_window": summary(window_s),
             "window_points": int(np.median(window_points)),
-            "first_window_points": len(scene.points),
+            "first_window_points": len(scene.shown),
             "drive_m": round(hi - lo, 1),
             "window_starts_m": [round(float(x - lo), 1) for x in starts],
             "port": server.get_port(),
@@ -172,7 +168,7 @@ def bench_scene(
 
 
 def shown_segment(session: ReviewSession, scene: ReviewScene) -> int:
-    shown = session.run.point_segment[scene.points]
+    shown = scene.shown.segment
     shown = shown[shown >= 0]
     if len(shown) == 0:
         raise GuardrailError("the scene's first window shows no segment to relabel")
@@ -187,12 +183,12 @@ def bench_relabel(
     for i in range(n):
         s, _ = timed(session.relabel, [segment], labels[i % 2])
         seconds.append(s)
-    shown = session.run.point_segment[scene.points] == segment
+    shown = scene.shown.segment == segment
     return {
         "segment": segment,
         "segment_points": int(session.run.segments["n_points"][segment]),
         "segment_points_shown": int(shown.sum()),
-        "window_points": len(scene.points),
+        "window_points": len(scene.shown),
         **summary(seconds),
     }
 
@@ -243,13 +239,15 @@ def repeat_set(data: TrainingSet, min_crops: int) -> tuple[TrainingSet, int]:
 
 def bench_retrain(session: ReviewSession, repeats: int) -> dict[str, Any]:
     run = session.run
-    labels = session.point_labels()
+    labels = session.operator_label.copy()  # what the app's fine-tuning job trains on
     params = ClassifierParams(mode="fast")
     from_run = []
     for _ in range(repeats):
-        s, _ = timed(train_from_run, run, labels, params=params)
+        s, _ = timed(train_from_run, run, operator_label=labels, params=params)
         from_run.append(s)
-    data = training_set_from_run(run, labels, mode="fast", input_size=params.input_size_px)
+    data = training_set_from_run(
+        run, operator_label=labels, mode="fast", input_size=params.input_size_px
+    )
     n_crops = int(data.has_crop.sum())
     result: dict[str, Any] = {
         "segments": len(data.labels),
@@ -352,6 +350,122 @@ def bench_retune(run_root: Path, repeats: int) -> dict[str, Any]:
     return {"runs": rows, "slowest_median_s": max(r["median_s"] for r in rows)}
 
 
+# -- 6. first view of a survey's run -----------------------------------------------------------
+
+
+def peak_rss_gb() -> float:
+    """This process's peak resident memory so far, GB (Linux reports kB)."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
+
+
+def first_view_child(drive: Path, run: Path) -> dict[str, Any]:
+    """In this fresh process: open the run as ``guardrail serve`` does (the session, a viser
+    server, the scene's first window), then move the window forward along the whole drive."""
+    imported_gb = peak_rss_gb()
+    with tempfile.TemporaryDirectory(prefix="bench_app_") as tmp:
+        load_s, session = timed(ReviewSession, drive, run, review_dir=Path(tmp), operator="bench")
+        server_s, server = timed(
+            viser.ViserServer, host="127.0.0.1", port=free_port(), verbose=False
+        )
+        try:
+            scene_s, scene = timed(
+                ReviewScene, session, server, window_m=WINDOW_M, point_budget=POINT_BUDGET
+            )
+            first_gb = peak_rss_gb()
+            lo, hi = scene.station_range
+            starts = np.arange(lo + 0.8 * WINDOW_M, max(lo, hi - WINDOW_M), 0.8 * WINDOW_M)
+            walk_s = [timed(scene.show_window, float(x))[0] for x in starts]
+            scene.close()
+        finally:
+            server.stop()
+            session.close()
+    return {
+        "points": session.tiles.n_points,
+        "tiles": len(session.tiles),
+        "segments": session.n_segments,
+        "drive_m": round(hi - lo, 1),
+        "load_s": round(load_s, 4),
+        "server_s": round(server_s, 4),
+        "scene_s": round(scene_s, 4),
+        "first_view_s": round(load_s + server_s + scene_s, 4),
+        "windows_walked": len(walk_s),
+        "walk_window_s": round(statistics.median(walk_s), 4) if walk_s else None,
+        "imported_gb": round(imported_gb, 3),
+        "first_view_gb": round(first_gb, 3),
+        "peak_gb": round(peak_rss_gb(), 3),
+    }
+
+
+def bench_first_view(pairs: list[tuple[Path, Path]], repeats: int) -> list[dict[str, Any]]:
+    """Each run opened ``repeats`` times, each in a fresh Python process (its memory its own)."""
+    rows = []
+    for drive, run in pairs:
+        measured = []
+        for _ in range(repeats):
+            child = subprocess.run(
+                [sys.executable, __file__, "--first-view-child", str(drive), str(run)],
+                capture_output=True,
+                text=True,
+                check=False,
+            )
+            if child.returncode != 0:
+                raise GuardrailError(f"{drive}, {run}: {child.stderr.strip()[-2000:]}")
+            measured.append(json.loads(child.stdout.strip().splitlines()[-1]))
+        first = [m["first_view_s"] for m in measured]
+        rows.append(
+            {
+                "drive": str(drive),
+                "run": str(run),
+                **{k: measured[0][k] for k in ("points", "tiles", "segments", "drive_m")},
+                "first_view": summary(first),
+                "load": summary([m["load_s"] for m in measured]),
+                "scene": summary([m["scene_s"] for m in measured]),
+                "walk_window_median_s": statistics.median(
+                    m["walk_window_s"] for m in measured if m["walk_window_s"] is not None
+                )
+                if any(m["walk_window_s"] is not None for m in measured)
+                else None,
+                "windows_walked": measured[0]["windows_walked"],
+                "imported_gb": max(m["imported_gb"] for m in measured),
+                "first_view_gb": max(m["first_view_gb"] for m in measured),
+                "peak_gb": max(m["peak_gb"] for m in measured),
+            }
+        )
+    return rows
+
+
+def print_first_view(rows: list[dict[str, Any]], repeats: int) -> None:
+    print(
+        f"{'run':<34} {'points':>11} {'first view':>11} {'target':>8} {'memory':>17} "
+        f"{'target':>8} {'next window':>12}"
+    )
+    for row in rows:
+        name = f"{Path(row['drive']).name} ({row['drive_m'] / 1000:.1f} km)"
+        first = row["first_view"]["median_s"]
+        memory = f"{row['first_view_gb']:.2f} / {row['peak_gb']:.2f} GB"
+        walk = row["walk_window_median_s"]
+        print(
+            f"{name:<34} {row['points']:>11,} {ms(first):>11} "
+            f"{verdict(first, TARGET_FIRST_VIEW_S, strict=True):>8} {memory:>17} "
+            f"{verdict(row['peak_gb'], TARGET_SERVER_GB, strict=True):>8} "
+            f"{'' if walk is None else ms(walk):>12}"
+        )
+    print(
+        textwrap.fill(
+            f"first view: the session (the run's tables and the label store), a viser server and "
+            f"the scene's first {WINDOW_M:.0f} m window, in a fresh process, median of {repeats}; "
+            f"memory: the process's peak resident memory at the first view / after moving the "
+            f"window forward along the whole run (imports alone: "
+            f"{max(r['imported_gb'] for r in rows):.2f} GB); targets: first view < "
+            f"{TARGET_FIRST_VIEW_S:.0f} s, memory < {TARGET_SERVER_GB:.0f} GB",
+            100,
+            initial_indent="  ",
+            subsequent_indent="    ",
+        )
+    )
+    print(f"  {platform.machine()}, {os.cpu_count()} cores, {platform.python_version()}")
+
+
 # -- output ------------------------------------------------------------------------------------
 
 
@@ -383,7 +497,6 @@ def print_table(result: dict[str, Any]) -> None:
     c, w = sc["construct"], sc["show_window"]
     window = f"{WINDOW_M:.0f} m window ({sc['first_window_points']:,} pts)"
     rows.append(timing_row(f"first scene: ReviewScene, {window}", c, TARGET_SCENE_S))
-    rows.append(timing_row("  of which stations of every point (track)", sc["stations"]))
     rows.append(
         timing_row(f"show_window, fresh window ({sc['window_points']:,} pts)", w, TARGET_SCENE_S)
     )
@@ -464,9 +577,35 @@ def main() -> int:
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--relabels", type=int, default=20, help="relabels timed (default 20)")
     parser.add_argument("--json", action="store_true")
+    parser.add_argument(
+        "--first-view",
+        nargs=2,
+        action="append",
+        type=Path,
+        metavar=("DRIVE", "RUN"),
+        help="measure only the first view and the memory of these runs (repeatable: e.g. runs "
+        "of 0.3, 1 and 3 km), each opened --repeats times in a fresh process",
+    )
+    parser.add_argument("--first-view-child", nargs=2, type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.repeats < 1 or args.relabels < 1:
         parser.error("--repeats and --relabels: expected at least 1")
+    if args.first_view_child:
+        with redirect_stdout(sys.stderr):  # viser's banner
+            measured = first_view_child(*args.first_view_child)
+        print(json.dumps(measured))
+        return 0
+    if args.first_view:
+        try:
+            rows = bench_first_view([tuple(pair) for pair in args.first_view], args.repeats)
+        except GuardrailError as exc:
+            print(f"bench_app: {exc}", file=sys.stderr)
+            return 2
+        if args.json:
+            print(json.dumps({"benchmark": "app_first_view", "runs": rows}, indent=2))
+        else:
+            print_first_view(rows, args.repeats)
+        return 0
 
     # viser prints a banner on stdout for every server: keep stdout for the table or the JSON.
     with tempfile.TemporaryDirectory(prefix="bench_app_") as tmp, redirect_stdout(sys.stderr):
@@ -495,7 +634,7 @@ def main() -> int:
         "benchmark": "app",
         "drive": str(args.drive),
         "run": str(args.run),
-        "points": len(session.drive.points),
+        "points": session.tiles.n_points,
         "segments": session.n_segments,
         "repeats": args.repeats,
         "machine": f"{platform.machine()}, {os.cpu_count()} cores, {platform.python_version()}",

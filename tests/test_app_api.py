@@ -16,6 +16,7 @@ from app.main import create_app
 from app.session import ReviewSession
 from guardrail_core.errors import InvalidOptionError
 from guardrail_core.extract.crops import CropParams, crop_window, cut_crop
+from guardrail_core.formats.drive import Drive
 from guardrail_core.formats.run_folder import load_run
 from tests.app_fixtures import copy_run, new_session
 
@@ -40,10 +41,10 @@ def _segment_with_crop(session: ReviewSession) -> int:
     return int(np.flatnonzero(session.run.segments["crop_status"] == 0)[0])
 
 
-def test_info_describes_the_run(client: TestClient, session: ReviewSession) -> None:
+def test_info_describes_the_run(client: TestClient, session: ReviewSession, drive: Drive) -> None:
     info = client.get("/api/info").json()
     assert info["n_segments"] == len(session.run)
-    assert info["n_points"] == len(session.drive.points)
+    assert info["n_points"] == len(drive.points)
     assert info["model"]["version"] == session.run.info.model.version
     assert info["token_required"] is False
 

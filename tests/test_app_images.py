@@ -10,6 +10,7 @@ from fastapi.testclient import TestClient
 from app.image_overlay import PICK_RADIUS_PX
 from app.scene.colours import GUARDRAIL, OTHER, SELECTED
 from app.session import ReviewSession
+from guardrail_core.formats.drive import Drive
 
 
 def _png(response) -> np.ndarray:  # type: ignore[no-untyped-def]
@@ -48,16 +49,18 @@ def test_the_segment_detail_names_its_image(
     assert module_client.get(f"/api/segments/{without}").json()["image_id"] is None
 
 
-def test_every_point_of_the_chosen_image_s_segment_is_drawn(module_session: ReviewSession) -> None:
+def test_every_point_of_the_chosen_image_s_segment_is_drawn(
+    module_session: ReviewSession, drive: Drive
+) -> None:
     """The chosen image holds all its segment's points (§3.2), so the overlay draws them all."""
     seg = module_session.run.segments
-    drive = module_session.drive
+    point_segment = module_session.run.folder.point_segment()
     ok = np.flatnonzero(seg["crop_status"] == 0)
     checked = 0
     for s in ok[:: max(1, len(ok) // 40)]:
         image = int(seg["image"][s])
         position = drive.images[image].T_world_camera[:3, 3]
-        points = drive.points.xyz[module_session.run.point_segment == s]
+        points = drive.points.xyz[point_segment == s]
         if (
             np.linalg.norm(points - position, axis=1).max()
             >= module_session.crops.params.max_range_m

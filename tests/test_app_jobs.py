@@ -16,6 +16,7 @@ from app import jobs as jobs_module
 from app.jobs import JobBusyError, JobRunner
 from app.main import create_app
 from app.session import ReviewSession
+from guardrail_core.formats.drive import load_drive
 from tests.app_fixtures import copy_run, new_session
 from tests.file_tree import file_tree
 
@@ -128,7 +129,7 @@ def test_a_reconstruction_stopped_half_way_leaves_the_previous_one(
 
     folder = session.run.root / "reconstruction"
     before = file_tree(folder)
-    drive = session.drive
+    drive = load_drive(session.drive.root)
 
     def stop_after_the_first_run(done: int, runs: int) -> None:
         if done == 1:

@@ -14,6 +14,8 @@ from app.scene.tuning import RunTuner, with_value
 from app.scene.viewer import ReviewScene
 from app.scene.window import window_points
 from app.session import ReviewSession
+from guardrail_core.formats.drive import Drive
+from guardrail_core.formats.drive_tiles import vehicle_station
 from tests.app_fixtures import copy_run, new_session
 
 
@@ -102,12 +104,16 @@ def scene(session: ReviewSession):
 
 
 def test_scene_shows_a_window_and_recolours_a_relabelled_segment(
-    scene: ReviewScene, session: ReviewSession
+    scene: ReviewScene, session: ReviewSession, drive: Drive
 ) -> None:
-    assert 0 < len(scene.points) <= 50_000
-    station = scene.station[scene.points]
+    window = scene.shown
+    assert 0 < len(window) <= 50_000
+    # The window read from the tiles holds the drive's points and the run's segments.
+    np.testing.assert_array_equal(window.xyz, drive.points.xyz[window.index])
+    np.testing.assert_array_equal(window.segment, session.folder.point_segment()[window.index])
+    station = vehicle_station(drive.trajectory, drive.points.gps_time[window.index])
     assert station.min() >= scene.start_m and station.max() < scene.start_m + 40.0
-    shown = session.run.point_segment[scene.points]
+    shown = window.segment
     s = int(np.bincount(shown[shown >= 0]).argmax())  # the segment with most points shown
     flipped = "other" if session.effective_label()[s] else "guardrail"
     session.relabel([s], flipped)

@@ -330,3 +330,32 @@ def test_store_file_is_wal_with_full_sync(store: LabelStore) -> None:
     assert store._conn.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
     assert store._conn.execute("PRAGMA synchronous").fetchone()[0] == 2  # FULL
     assert os.path.exists(str(store.path) + "-wal")
+
+
+def test_labels_looked_up_equal_the_dense_labels_through_labels_and_undos(
+    store: LabelStore, tmp_path: Path
+) -> None:
+    """The store holds only the labelled points; looking points up gives what a dense array of
+    every point's label gives, after relabelling, undoing, and reopening."""
+    rng = np.random.default_rng(5)
+    dense = np.full(N, UNLABELLED, np.int8)
+    history: list[np.ndarray] = []
+    for step in range(30):
+        if step % 4 == 3 and history:
+            dense = history.pop()
+            assert store.undo(who="ann") is not None
+        else:
+            points = rng.choice(N, int(rng.integers(1, 200)), replace=False)
+            label = int(rng.integers(0, 2))
+            history.append(dense.copy())
+            dense[points] = label
+            store.set_labels(points, label, who="ann")
+        asked = rng.integers(0, N, 300)
+        np.testing.assert_array_equal(store.labels_at(asked), dense[asked])
+        np.testing.assert_array_equal(store.point_labels(), dense)
+        points, labels = store.labelled()
+        np.testing.assert_array_equal(points, np.flatnonzero(dense >= 0))
+        np.testing.assert_array_equal(labels, dense[dense >= 0])
+    assert store.labels_at(np.zeros(0, np.int64)).shape == (0,)
+    with LabelStore(store.path, n_points=N) as again:
+        np.testing.assert_array_equal(again.labels_at(np.arange(N)), dense)

@@ -165,6 +165,32 @@ def test_training_set_from_run_fast_and_full(run_path: Path) -> None:
         training_set_from_run(run, labels, mode="slow")
 
 
+def test_segment_labels_train_as_the_point_labels_they_come_from(run_path: Path) -> None:
+    """The review app keeps the operators' labels per segment (it holds nothing per point):
+    given those, the training set is the one the point labels give."""
+    run = load_run(run_path)
+    labels, flipped = _flip_some(run)
+    operator = segment_labels(run.point_segment, len(run), labels)
+    by_points = training_set_from_run(run, labels, include_unreviewed=False)
+    by_segments = training_set_from_run(run, operator_label=operator, include_unreviewed=False)
+    assert np.array_equal(by_points.labels, by_segments.labels) and len(by_points.labels) == 6
+    assert by_points.sources == by_segments.sources
+    assert np.array_equal(by_points.embeddings, by_segments.embeddings)  # type: ignore[arg-type]
+    label, reviewed = effective_labels(run, operator_label=operator)
+    assert np.flatnonzero(reviewed).tolist() == flipped.tolist()
+    assert np.array_equal(label, effective_labels(run, labels)[0])
+    with pytest.raises(InvalidOptionError, match="one of the two"):
+        training_set_from_run(run, labels, operator_label=operator)
+    with pytest.raises(InvalidOptionError, match="one of the two"):
+        training_set_from_run(run)
+    with pytest.raises(InvalidOptionError, match="another run"):
+        training_set_from_run(run, operator_label=operator[:-1])
+    with pytest.raises(InvalidOptionError, match="-1, 0 or 1"):
+        training_set_from_run(run, operator_label=np.full(len(run), 2, np.int8))
+    with pytest.raises(InvalidOptionError, match="one of the two"):
+        train_from_run(run, labels, operator_label=operator)
+
+
 def test_fast_training_set_without_embeddings_reads_the_crops(run_copy: Path) -> None:
     (run_copy / "embeddings.npy").unlink()
     run = load_run(run_copy)

@@ -63,7 +63,7 @@ def get_segment(session: Session, segment_id: int) -> dict[str, Any]:
     s = _segment(session, segment_id)
     row = segment_rows(session, np.array([s]))[0]
     image = int(session.run.segments["image"][s])
-    points = session.index.points_of([s])
+    points = session.tiles.points_of([s])
     row.update(
         image=session.run.info.images[image] if image >= 0 else None,
         image_id=image if image >= 0 else None,

@@ -22,16 +22,17 @@ import viser.transforms as vtf
 
 from app import review_jobs
 from app.jobs import JobBusyError, JobRunner
+from app.run_tiles import TilePoints
 from app.scene.colours import COLOUR_MODES, point_colours
 from app.scene.picking import in_rectangle, pick_along_ray, project_to_screen
 from app.scene.tuning import TUNABLE, RunTuner, slider_value, with_value
 from app.scene.window import window_points
 from app.session import ReviewSession
 from guardrail_core.errors import GuardrailError, RunFolderError
+from guardrail_core.formats.drive_tiles import vehicle_station
 from guardrail_core.io.meshes import run_file_stem
 from guardrail_core.reconstruct.assemble import run_mesh
 from guardrail_core.reconstruct.pipeline import ReconstructionParams
-from guardrail_core.sensors.track import track_coordinates
 
 #: The selection panel without a selection: picking is the scene's, labelling the page's.
 NO_SELECTION = "Click a point to select its segment (shift + drag: many); label it on the page."
@@ -72,12 +73,12 @@ class ReviewScene:
         self.server = server
         self.window_m = float(window_m)
         self.point_budget = int(point_budget)
-        drive = session.drive
-        track = track_coordinates(drive.points.xyz, drive.points.gps_time, drive.trajectory)
-        self.station = track.station  # (N,) metres along the trajectory
-        self.station_range = (float(self.station.min()), float(self.station.max()))
+        trajectory = session.drive.trajectory
+        # The window runs along what the vehicle drove: nothing per point is worked out ahead.
+        self.vehicle_station = vehicle_station(trajectory, trajectory.time)  # (T,) metres
+        self.station_range = (float(self.vehicle_station[0]), float(self.vehicle_station[-1]))
         self.start_m = self.station_range[0]
-        self.points = np.zeros(0, np.int64)  # drive points now shown
+        self.shown = TilePoints.concatenate([])  # the drive points now shown
         self.mode = "label"
         self._lock = threading.RLock()
         self._cloud: viser.PointCloudHandle | None = None
@@ -110,17 +111,15 @@ class ReviewScene:
         start_m = float(np.clip(start_m, lo, max(lo, hi - self.window_m)))
         with self._lock:
             self.start_m = start_m
-            self.points = window_points(
-                self.station,
-                self.session.run.point_segment,
-                start_m,
-                self.window_m,
-                self.point_budget,
+            window = self.session.tiles.window(start_m, start_m + self.window_m)
+            self.shown = window.take(
+                window_points(
+                    window.station, window.segment, start_m, self.window_m, self.point_budget
+                )
             )
-            xyz = self.session.drive.points.xyz[self.points]
             self._cloud = self.server.scene.add_point_cloud(
                 "/drive/points",
-                points=xyz.astype(np.float32),
+                points=self.shown.xyz.astype(np.float32),
                 colors=self._colours(),
                 point_size=0.04,
                 point_shape="circle",
@@ -129,25 +128,22 @@ class ReviewScene:
         self._add_cameras()
         self._window_text.content = (
             f"{start_m:.0f}-{start_m + self.window_m:.0f} m of "
-            f"{hi - lo:.0f} m · {len(self.points):,} points"
+            f"{hi - lo:.0f} m · {len(self.shown):,} points"
         )
         return time.perf_counter() - clock
 
     def _colours(self) -> np.ndarray:
         session = self.session
-        point_class = None
-        if session.drive.truth is not None:
-            point_class = session.drive.truth.point_class[self.points]
         selected = np.zeros(session.n_segments, bool)
         selected[session.selection] = True
         return point_colours(
             self.mode,
-            session.run.point_segment[self.points],
+            self.shown.segment,
             segment_label=session.effective_label(),
             raw_label=session.run.segments["raw_label"],
             probability=session.run.segments["probability"],
-            point_labels=session.point_labels()[self.points],
-            point_class=point_class,
+            point_labels=session.labels_at(self.shown.index),
+            point_class=self.shown.point_class,
             selected=selected,
         )
 
@@ -182,11 +178,7 @@ class ReviewScene:
         if not drive.images:
             return
         times = np.array([image.gps_time for image in drive.images])
-        station = np.interp(
-            times,
-            drive.points.gps_time[:: max(1, len(drive.points) // 5000)],
-            self.station[:: max(1, len(drive.points) // 5000)],
-        )
+        station = np.interp(times, drive.trajectory.time, self.vehicle_station)
         inside = np.flatnonzero(
             (station >= self.start_m) & (station < self.start_m + self.window_m)
         )
@@ -229,41 +221,40 @@ class ReviewScene:
 
     # -- picking ----------------------------------------------------------------------------
 
-    def _labelled_points(self) -> np.ndarray:
-        return self.points[self.session.run.point_segment[self.points] >= 0]
+    def _segment_points(self) -> TilePoints:
+        """The points shown that lie in a segment (what a click or a rectangle may pick)."""
+        shown = self.shown
+        return shown.take(np.flatnonzero(shown.segment >= 0))
 
     def _on_click(self, event: viser.SceneClickEvent) -> None:
-        candidates = self._labelled_points()
+        candidates = self._segment_points()
         hit = pick_along_ray(
-            self.session.drive.points.xyz[candidates],
-            np.asarray(event.ray_origin),
-            np.asarray(event.ray_direction),
+            candidates.xyz, np.asarray(event.ray_origin), np.asarray(event.ray_direction)
         )
         if hit is None:
             return
-        segment = int(self.session.run.point_segment[candidates[hit]])
-        self.session.select([segment])
+        self.session.select([int(candidates.segment[hit])])
 
     def _on_rect_select(self, event: viser.SceneRectSelectEvent) -> None:
         camera = event.client.camera
         T = np.eye(4)
         T[:3, :3] = vtf.SO3(np.asarray(camera.wxyz)).as_matrix()
         T[:3, 3] = camera.position
-        candidates = self._labelled_points()
-        uv, in_front = project_to_screen(
-            self.session.drive.points.xyz[candidates], T, camera.fov, camera.aspect
-        )
+        candidates = self._segment_points()
+        uv, in_front = project_to_screen(candidates.xyz, T, camera.fov, camera.aspect)
         inside = in_rectangle(
             uv, in_front, np.asarray(event.screen_min), np.asarray(event.screen_max)
         )
-        segments = np.unique(self.session.run.point_segment[candidates[inside]])
+        segments = np.unique(candidates.segment[inside])
         if len(segments):
             self.session.select(segments)
 
     def fly_to(self, segment: int) -> None:
         """Move the window and every browser's camera to a segment."""
         target = self.session.run.segments["centroid"][segment]
-        station = float(np.median(self.station[self.session.index.points_of([segment])]))
+        trajectory = self.session.drive.trajectory
+        scanned = float(np.mean(self.session.run.segments["time"][segment]))
+        station = float(np.interp(scanned, trajectory.time, self.vehicle_station))
         if not self.start_m <= station < self.start_m + self.window_m:
             self.show_window(station - self.window_m / 2)
         for client in self.server.get_clients().values():
@@ -286,9 +277,11 @@ class ReviewScene:
             target = self.session.run.segments["centroid"][int(self.session.selection[0])]
             self._look_at(client, target, distance_m=8.0)
             return
-        shown = self.session.drive.points.xyz[self.points]
-        ahead = self.station[self.points] < self.start_m + 0.3 * self.window_m
-        target = np.median(shown[ahead] if ahead.any() else shown, axis=0)
+        shown = self.shown
+        if len(shown) == 0:
+            return
+        ahead = shown.station < self.start_m + 0.3 * self.window_m
+        target = np.median(shown.xyz[ahead] if ahead.any() else shown.xyz, axis=0)
         self._look_at(client, target, distance_m=25.0)
 
     def close(self) -> None:

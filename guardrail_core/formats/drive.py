@@ -146,13 +146,18 @@ class Drive:
 
     def read_image(self, record: ImageRecord) -> np.ndarray:
         """The image (H, W, 3) uint8 RGB of a record."""
-        return _read_image(self.root / record.file, cv2.IMREAD_COLOR)[:, :, ::-1].copy()
+        return read_rgb_image(self.root, record)
 
     def read_mask(self, record: ImageRecord) -> np.ndarray:
         """The truth class mask (H, W) uint8 of a record (synthetic drives only)."""
         if self.truth is None:
             raise MissingDriveFileError(f"{self.root}: this drive has no truth/ folder")
         return _read_image(self.root / self.truth.mask_files[record.file], cv2.IMREAD_UNCHANGED)
+
+
+def read_rgb_image(root: Path, record: ImageRecord) -> np.ndarray:
+    """The image (H, W, 3) uint8 RGB of a record of the drive folder ``root``."""
+    return _read_image(root / record.file, cv2.IMREAD_COLOR)[:, :, ::-1].copy()
 
 
 def _read_image(path: Path, flags: int) -> np.ndarray:
@@ -303,6 +308,25 @@ class DriveSource:
                 _mask_files(self.images),
             )
         return points, truth
+
+    def read_truth_tile(self, i: int) -> np.ndarray:
+        """(n,) uint8 truth class of every point of tile ``i`` (its LAS file is not read).
+
+        Raises
+        ------
+        MissingDriveFileError
+            The drive has no truth (or it was not asked for), or the tile's truth file is missing.
+        DriveFormatError, DriveDimensionError
+            The truth file is damaged or does not hold one class per point of the tile.
+        """
+        record = self.tiles.tiles[i]
+        if not self.has_truth or record.truth is None:
+            raise MissingDriveFileError(f"{self.root}: tile {record.file} has no truth file")
+        return _load_truth_arrays(self.root / record.truth, record.points)[0]
+
+    def read_image(self, record: ImageRecord) -> np.ndarray:
+        """The image (H, W, 3) uint8 RGB of a record."""
+        return read_rgb_image(self.root, record)
 
     def drive(self, points: PointCloud, truth: Truth | None = None) -> Drive:
         """A :class:`Drive` of these points (a window of this drive, or all of it)."""

@@ -20,6 +20,7 @@ import io
 import json
 from contextlib import ExitStack
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -88,19 +89,24 @@ class Run:
     ----------
     root : the folder
     info : run.json, typed
-    point_segment : (N,) int32, segment of every drive point (or POINT_ROAD / POINT_OFF_ROAD)
     segments : SEGMENT_FIELDS arrays, each with S rows
     timings : timings.json
+    point_segment : (N,) int32, segment of every drive point (or POINT_ROAD / POINT_OFF_ROAD),
+        read from the point tiles the first time it is asked for: a survey-scale run's reader
+        (the review app) reads the tiles it needs instead (:meth:`RunFolder.point_segment_tile`)
     """
 
     root: Path
     info: RunInfo
-    point_segment: np.ndarray
     segments: dict[str, np.ndarray]
     timings: dict[str, Any]
 
     def __len__(self) -> int:
         return int(len(self.segments["n_points"]))
+
+    @cached_property
+    def point_segment(self) -> np.ndarray:
+        return self.folder.point_segment()
 
     @property
     def folder(self) -> RunFolder:

@@ -184,7 +184,8 @@ class RunFolder:
         return np.load(path, allow_pickle=False) if path.is_file() else None
 
     def load(self) -> Run:
-        """The whole run (but crops, embeddings and reconstruction) in memory.
+        """The run's tables in memory (its per-point segments when first asked for; not its
+        embeddings and reconstruction).
 
         Raises
         ------
@@ -192,4 +193,4 @@ class RunFolder:
             As :meth:`open`, or a file is missing or damaged (the message names it).
         """
         info = self.info()
-        return Run(self.root, info, self.point_segment(), self.segments(), self.timings())
+        return Run(self.root, info, self.segments(), self.timings())

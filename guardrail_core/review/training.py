@@ -116,7 +116,9 @@ def segment_labels(
     return out
 
 
-def effective_labels(run: Run, point_labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def effective_labels(
+    run: Run, point_labels: np.ndarray | None = None, *, operator_label: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Labels to train on: the operators' where they reviewed, the run's corrected ones elsewhere.
 
     Parameters
@@ -124,13 +126,15 @@ def effective_labels(run: Run, point_labels: np.ndarray) -> tuple[np.ndarray, np
     run : the run folder
     point_labels : (N,) int8, operator label of every drive point (-1 none, 0 other, 1 guardrail),
         :meth:`guardrail_core.formats.label_store.LabelStore.point_labels`
+    operator_label : or, instead, (S,) int8 the operators' label of every segment (-1 none;
+        :func:`segment_labels`), as the review app keeps them (it holds nothing per point)
 
     Returns
     -------
     label : (S,) bool, True for guardrail
     reviewed : (S,) bool, the segment has operator-labelled points
     """
-    operator = segment_labels(run.point_segment, len(run), point_labels)
+    operator = _operator_label(run, point_labels, operator_label)
     reviewed = operator >= 0
     label = np.where(reviewed, operator == 1, np.asarray(run.segments["label"], bool))
     return label, reviewed
@@ -138,8 +142,9 @@ def effective_labels(run: Run, point_labels: np.ndarray) -> tuple[np.ndarray, np
 
 def training_set_from_run(
     run: Run,
-    point_labels: np.ndarray,
+    point_labels: np.ndarray | None = None,
     *,
+    operator_label: np.ndarray | None = None,
     mode: str = "fast",
     include_unreviewed: bool = True,
     input_size: int = 128,
@@ -151,6 +156,7 @@ def training_set_from_run(
     ----------
     run : the run folder
     point_labels : (N,) int8 operator labels of the drive's points
+    operator_label : or, instead, (S,) int8 the operators' label of every segment (-1 none)
     mode : "fast": the crops' embeddings from ``embeddings.npy`` when the run has them (no image
         is read but for the rows the run lacks); "full" (or a run without embeddings): the crops
     include_unreviewed : False keeps only the segments the operators labelled
@@ -167,14 +173,14 @@ def training_set_from_run(
     Raises
     ------
     InvalidOptionError
-        Bad mode, or point labels not of the run's drive.
+        Bad mode, point labels not of the run's drive, segment labels not of the run, or not
+        exactly one of ``point_labels`` and ``operator_label``.
     MissingDriveFileError
         An image a crop is cut from is missing or unreadable.
     """
     if mode not in MODES:
         raise InvalidOptionError(f"mode: expected 'fast' or 'full', got {mode!r}")
-    _check_point_labels(run, point_labels)
-    label, reviewed = effective_labels(run, point_labels)
+    label, reviewed = effective_labels(run, point_labels, operator_label=operator_label)
     rows = np.arange(len(run)) if include_unreviewed else np.flatnonzero(reviewed)
     segments = run.segments
     has_crop = segments["crop_status"][rows] == CROP_OK
@@ -240,8 +246,9 @@ class ReviewTraining:
 
 def train_from_run(
     run: Run,
-    point_labels: np.ndarray,
+    point_labels: np.ndarray | None = None,
     *,
+    operator_label: np.ndarray | None = None,
     params: ClassifierParams = ClassifierParams(mode="fast"),
     head: SegmentHeadParams = SegmentHeadParams(),
     include_unreviewed: bool = True,
@@ -255,6 +262,7 @@ def train_from_run(
     ----------
     run : the run folder
     point_labels : (N,) int8 operator labels of the drive's points (-1 none, 0 other, 1 guardrail)
+    operator_label : or, instead, (S,) int8 the operators' label of every segment (-1 none)
     params : crop classifier parameters; fast mode trains on the run's ``embeddings.npy`` in
         seconds, full mode fine-tunes on the crops (minutes)
     head : segment head parameters
@@ -294,15 +302,16 @@ def train_from_run(
     clock = time.perf_counter()
     if progress_fn is not None:
         progress_fn(0.0, "reading the run")
+    operator_label = _operator_label(run, point_labels, operator_label)  # worked out once
     data = training_set_from_run(
         run,
-        point_labels,
+        operator_label=operator_label,
         mode=params.mode,
         include_unreviewed=include_unreviewed,
         input_size=params.input_size_px,
         drive_root=drive_root,
     )
-    reviewed_all = effective_labels(run, point_labels)[1]
+    reviewed_all = effective_labels(run, operator_label=operator_label)[1]
     rows = np.arange(len(run)) if include_unreviewed else np.flatnonzero(reviewed_all)
     reviewed = reviewed_all[rows]
     n_reviewed = data.sources[0]["reviewed"]
@@ -501,6 +510,32 @@ def write_predictions(
 # ---------------------------------------------------------------------------------------------
 # Helpers
 # ---------------------------------------------------------------------------------------------
+
+
+def _operator_label(
+    run: Run, point_labels: np.ndarray | None, operator_label: np.ndarray | None
+) -> np.ndarray:
+    """(S,) int8 the operators' label of every segment, from labels per point or per segment."""
+    if (point_labels is None) == (operator_label is None):
+        raise InvalidOptionError(
+            "expected the operators' labels per point (point_labels) or per segment "
+            "(operator_label), one of the two"
+        )
+    if point_labels is not None:
+        _check_point_labels(run, point_labels)
+        return segment_labels(run.point_segment, len(run), point_labels)
+    operator = np.asarray(operator_label)
+    if operator.shape != (len(run),) or operator.dtype.kind not in "iu":
+        raise InvalidOptionError(
+            f"operator_label: expected ({len(run)},) integer labels, one per segment of the run, "
+            f"got shape {operator.shape} dtype {operator.dtype} (labels of another run?)"
+        )
+    if len(operator) and (operator.min() < -1 or operator.max() > 1):
+        raise InvalidOptionError(
+            f"operator_label: expected -1, 0 or 1, got values from {operator.min()} to "
+            f"{operator.max()}"
+        )
+    return operator.astype(np.int8)
 
 
 def _check_point_labels(run: Run, point_labels: np.ndarray) -> None:

@@ -277,13 +277,16 @@ def _point_to_click(
     import numpy as np
 
     from app.image_overlay import PICK_RADIUS_PX, ImageOverlay
+    from app.run_tiles import RunTiles
     from guardrail_core.extract.crops import CropParams
-    from guardrail_core.formats.drive import load_drive
-    from guardrail_core.formats.run_folder import load_run
+    from guardrail_core.formats.drive import open_drive
+    from guardrail_core.formats.run_folder_paths import RunFolder
 
-    run = load_run(run_path)
-    params = CropParams.from_json(run.info.params["crops"])
-    found = ImageOverlay(load_drive(drive_path), run.point_segment, params).points(image)
+    folder = RunFolder.open(run_path)
+    params = CropParams.from_json(folder.info().params["crops"])
+    source = open_drive(drive_path)
+    tiles = RunTiles(source, folder, folder.segments()["time"])
+    found = ImageOverlay(source, tiles, params).points(image)
     segments, counts = np.unique(found.segment[found.segment >= 0], return_counts=True)
     for t in segments[counts >= 20]:
         if t == not_segment:

@@ -20,8 +20,9 @@ killed process loses no committed label (a power cut included). Measured on the 
 machine (2 shared cores, ext4 on a virtual disk, a drive of 2.56M points): ``set_labels`` of 300
 points takes about 1.0 ms (median of 50; 0.5 ms with ``synchronous=NORMAL``, which may lose the
 last commits on a power cut), so FULL it is; 100,000 points take 0.1 s (0.25 s when relabelling),
-an undo of them 0.2 s. :meth:`LabelStore.point_labels` copies the array in 0.3 ms; opening a store
-of 1M labelled points reads them in about 0.6 s.
+an undo of them 0.2 s. :meth:`LabelStore.labels_at` looks points up in the labelled
+ones, which are all the store holds in memory (a survey's memory follows what operators labelled,
+not its length); opening a store of 1M labelled points reads them in about 0.6 s.
 
 Threads: one :class:`LabelStore` may be shared by the threads of a process (web workers and a
 training thread); every statement group runs under one lock. Another process (or another
@@ -30,7 +31,7 @@ training thread); every statement group runs under one lock. Another process (or
 
 Modules: :mod:`.schema` (label values, tables, opening a store file), :mod:`.changes` (recording
 batches and walking them back for an undo), :mod:`.history` (reading the history),
-:mod:`.store` (:class:`LabelStore`, the API).
+:mod:`.sparse` (the labelled points in memory), :mod:`.store` (:class:`LabelStore`, the API).
 """
 
 from guardrail_core.formats.label_store.schema import (

@@ -9,10 +9,14 @@ from __future__ import annotations
 import sqlite3
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from guardrail_core.errors import LabelStoreError
+
+if TYPE_CHECKING:
+    from guardrail_core.formats.label_store.sparse import SparseLabels
 
 LABEL_OTHER = 0
 LABEL_GUARDRAIL = 1
@@ -145,18 +149,19 @@ def open_tables(conn: sqlite3.Connection, path: Path, *, n_points: int, drive_na
     return meta.get("drive_name", "")
 
 
-def read_labels(conn: sqlite3.Connection, path: Path, n_points: int) -> np.ndarray:
-    """(n_points,) int8 from the labels table, :data:`UNLABELLED` where none.
+def read_labels(conn: sqlite3.Connection, path: Path, n_points: int) -> SparseLabels:
+    """The labels table: every labelled point and its label.
 
     Raises
     ------
     LabelStoreError
         The table names points outside ``[0, n_points)``.
     """
-    out = np.full(n_points, UNLABELLED, np.int8)
+    from guardrail_core.formats.label_store.sparse import SparseLabels  # it builds on this module
+
     rows = np.array(conn.execute("SELECT point, label FROM labels").fetchall(), np.int64)
-    if len(rows):
-        if rows[:, 0].min() < 0 or rows[:, 0].max() >= n_points:
-            raise LabelStoreError(f"{path}: damaged label store: points outside [0, {n_points})")
-        out[rows[:, 0]] = rows[:, 1]
-    return out
+    if len(rows) == 0:
+        return SparseLabels(np.zeros(0, np.int64), np.zeros(0, np.int8))
+    if rows[:, 0].min() < 0 or rows[:, 0].max() >= n_points:
+        raise LabelStoreError(f"{path}: damaged label store: points outside [0, {n_points})")
+    return SparseLabels(rows[:, 0], rows[:, 1])

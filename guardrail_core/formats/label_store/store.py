@@ -150,12 +150,24 @@ class LabelStore:
         """(n_points,) int8: :data:`UNLABELLED` where no operator label, else 0 (other) or 1
         (guardrail).
 
-        A copy (a consistent snapshot the caller may keep or change; about 1 ms per million
-        points), not a view of the store's array, which other threads change.
+        A dense array of the whole drive, made on each call (a consistent snapshot the caller may
+        keep or change); a survey-scale reader asks :meth:`labels_at` or :meth:`labelled`.
         """
         with self._lock:
             self._connection()
-            return self._labels.copy()
+            return self._labels.dense(self.n_points)
+
+    def labels_at(self, points: np.ndarray) -> np.ndarray:
+        """(K,) int8 label of each of ``points`` (K,) int: :data:`UNLABELLED` where none."""
+        with self._lock:
+            self._connection()
+            return self._labels.at(points)
+
+    def labelled(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every labelled point: (L,) int64 sorted point indices and their (L,) int8 labels."""
+        with self._lock:
+            self._connection()
+            return self._labels.points.copy(), self._labels.labels.copy()
 
     def set_labels(
         self,
@@ -203,7 +215,7 @@ class LabelStore:
             conn.execute("BEGIN IMMEDIATE")
             try:
                 self._connection()  # another process may have committed before our write lock
-                old = self._labels[pts].astype(np.int64)
+                old = self._labels.at(pts).astype(np.int64)
                 changed = old != label
                 cp, co = pts[changed], old[changed]
                 prev = np.zeros(len(cp), np.int64)
@@ -229,7 +241,7 @@ class LabelStore:
             except BaseException:
                 conn.execute("ROLLBACK")
                 raise
-            self._labels[cp] = label
+            self._labels.assign(cp, np.full(len(cp), label))
         return LabelChange(batch=batch, n_points=len(cp), points=pts, undone_batch=None)
 
     def undo(self, *, who: str | None = None) -> LabelChange | None:
@@ -301,7 +313,7 @@ class LabelStore:
                 if conn.in_transaction:
                     conn.execute("ROLLBACK")
                 raise
-            self._labels[pts] = old
+            self._labels.assign(pts, old)
         return LabelChange(batch=batch, n_points=len(pts), points=pts, undone_batch=target)
 
     def _check_meta(
@@ -361,8 +373,8 @@ class LabelStore:
         both kinds)."""
         with self._lock:
             conn = self._connection()
-            guardrail = int(np.count_nonzero(self._labels == LABEL_GUARDRAIL))
-            other = int(np.count_nonzero(self._labels == LABEL_OTHER))
+            guardrail = int(np.count_nonzero(self._labels.labels == LABEL_GUARDRAIL))
+            other = int(np.count_nonzero(self._labels.labels == LABEL_OTHER))
             (batches,) = conn.execute("SELECT COUNT(*) FROM batches").fetchone()
         return {
             "labelled_points": guardrail + other,
