@@ -13,7 +13,17 @@ from fastapi.staticfiles import StaticFiles
 from app.auth import require_token
 from app.jobs import JobRunner
 from app.request_guard import RequestGuard
-from app.routers import images, info, labels, queue, reconstruction, runs, segments, training
+from app.routers import (
+    images,
+    info,
+    labels,
+    overview,
+    queue,
+    reconstruction,
+    runs,
+    segments,
+    training,
+)
 from app.schemas import GUARDED, UNAUTHORIZED
 from app.session import ReviewSession
 from app.validation_errors import validation_error_response
@@ -57,7 +67,7 @@ def create_app(
     app.add_middleware(RequestGuard, allowed_hosts=allowed_hosts)
     app.add_exception_handler(RequestValidationError, validation_error_response)
     guarded = [Depends(require_token)]
-    for module in (info, segments, images, labels, queue, training, reconstruction, runs):
+    for module in (info, segments, images, labels, queue, training, reconstruction, runs, overview):
         app.include_router(
             module.router, dependencies=guarded, responses={**UNAUTHORIZED, **GUARDED}
         )

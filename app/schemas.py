@@ -257,6 +257,40 @@ class RunHistogram(ResponseModel):
     )
 
 
+class RouteRun(ResponseModel):
+    """A reconstructed guardrail run on the route, with the operators' progress on it."""
+
+    run_id: int
+    status: str = Field(description="reconstructed, poles only (the inventory's status)")
+    type: str = Field(description="pipe, beam or unknown")
+    signature: str | None = Field(description="the design in words (pipes or beam section)")
+    length_m: float | None = Field(description="metres between its first and last pole")
+    poles: int
+    station_m: float = Field(description="metres along the drive where it starts")
+    path: list[list[float]] = Field(description="its poles in order, [x, y] local metres")
+    segments: int = Field(
+        description="segments on it that the model or an operator calls guardrail, or reviewed"
+    )
+    reviewed: int = Field(description="of them, those an operator labelled")
+    changed: int = Field(description="of the reviewed, those whose label the operator changed")
+    state: Literal["unreviewed", "reviewed", "changed"]
+    segment: int | None = Field(
+        description="the segment to fly to: its most doubtful unreviewed one, else its first"
+    )
+
+
+class RouteOverview(ResponseModel):
+    """The route at a glance: the trajectory and every reconstructed run along it."""
+
+    trajectory: list[list[float]] = Field(description="[x, y] local metres, thinned for a map")
+    length_m: float = Field(description="metres driven")
+    runs: list[RouteRun] = Field(description="in order along the drive")
+    segments_off_runs: int = Field(
+        description="segments the model or an operator calls guardrail, or reviewed, that lie "
+        "on no reconstructed run (runs without poles, rails beyond their end poles, mistakes)"
+    )
+
+
 class SegmentPage(ResponseModel):
     """One page of the filtered, sorted segments."""
 

@@ -1,5 +1,5 @@
 """Screenshots of the review app for the README: the 3D scene with a selected segment, the
-selected segment's panel with its camera image, and the crop gallery.
+selected segment's panel with its camera image, the route panel, and the crop gallery.
 
 Serves a drive (default: the demo's) with ``guardrail serve`` on free ports, drives Debian's
 Chromium with Playwright and writes PNGs into ``docs/images/``. Labels go to a temporary review
@@ -103,12 +103,28 @@ def shoot(url: str, segment: int) -> None:
         page.screenshot(path=IMAGES / "app_review.png")
         page.locator("#selection-panel").screenshot(path=IMAGES / "app_camera.png")
 
+        # The route panel with some review done: one run reviewed as it was, one changed.
+        runs = page.evaluate("fetch('/api/overview').then((r) => r.json())")["runs"]
+        done = [r for r in runs if r["segment"] is not None][:2]
+        for run, label in zip(done, ("guardrail", "other"), strict=False):
+            page.evaluate(
+                "(body) => fetch('/api/labels/batch', {method: 'POST', headers: "
+                "{'Content-Type': 'application/json'}, body: JSON.stringify(body)})",
+                {"segments": [run["segment"]], "label": label, "expand": "none"},
+            )
+        page.reload()
+        page.wait_for_selector("#route-table tbody tr", timeout=30_000)
+        page.locator("body").press("]")  # fly to the first run along the drive
+        page.wait_for_selector("#route-table tbody tr.current", timeout=30_000)
+        page.locator("#route-panel").scroll_into_view_if_needed()
+        page.locator("#route-panel").screenshot(path=IMAGES / "app_route.png")
+
         page.goto(f"{url}/gallery")
         page.wait_for_selector("#gallery-grid .crop", timeout=30_000)
         time.sleep(3)
         page.screenshot(path=IMAGES / "app_gallery.png")
         browser.close()
-    print(f"wrote {IMAGES}/app_review.png, app_camera.png and app_gallery.png")
+    print(f"wrote {IMAGES}/app_review.png, app_camera.png, app_route.png and app_gallery.png")
 
 
 if __name__ == "__main__":

@@ -103,6 +103,22 @@ FIELDS_THE_PAGES_READ: dict[tuple[str, str], list[str]] = {
         "result.metrics_current.guardrail.f1",
     ],
     ("post", "/api/models/{version}/activate"): ["active", "changed_segments"],
+    ("get", "/api/overview"): [
+        "trajectory",
+        "length_m",
+        "segments_off_runs",
+        "runs[].run_id",
+        "runs[].type",
+        "runs[].signature",
+        "runs[].length_m",
+        "runs[].poles",
+        "runs[].path",
+        "runs[].segments",
+        "runs[].reviewed",
+        "runs[].changed",
+        "runs[].state",
+        "runs[].segment",
+    ],
 }
 
 #: Models of figures read from stored model folders, which keep fields they do not name.

@@ -7,6 +7,7 @@
 
 import * as api from "./api.js";
 import { int, pct, plural, toast } from "./api.js";
+import { initRoute, loadRoute, stepRun } from "./route.js";
 
 const SELECTION_POLL_MS = 700;
 const JOB_POLL_MS = 500;
@@ -429,7 +430,7 @@ async function undo() {
 // After anything that changes labels: refresh what shows them.
 async function afterChange() {
   state.labelsVersion += 1;
-  await Promise.all([loadDetail(), loadQueue(), loadInfo()]);
+  await Promise.all([loadDetail(), loadQueue(), loadInfo(), loadRoute()]);
 }
 
 // ---- fine-tuning ---------------------------------------------------------
@@ -600,6 +601,12 @@ function onKeyDown(event) {
     case "i":
       toggleCamera();
       break;
+    case "[":
+      run(() => stepRun(-1));
+      break;
+    case "]":
+      run(() => stepRun(+1));
+      break;
     default:
       return;
   }
@@ -618,7 +625,7 @@ function refreshOnReturn() {
   if (now - state.lastRefresh < 2000) return;
   state.lastRefresh = now;
   state.labelsVersion += 1; // the gallery may have relabelled points on the camera image
-  Promise.all([loadDetail(), loadQueue(), loadInfo()]).catch(() => {});
+  Promise.all([loadDetail(), loadQueue(), loadInfo(), loadRoute()]).catch(() => {});
 }
 
 // ---- start --------------------------------------------------------------
@@ -662,6 +669,7 @@ async function init() {
   $("train").addEventListener("click", () => run(startTraining));
   $("activate").addEventListener("click", () => run(activateNew));
   $("keep").addEventListener("click", keepCurrent);
+  initRoute(selectSegments, run);
 
   try {
     await loadInfo();
@@ -674,6 +682,7 @@ async function init() {
     }
   }
   const queueLoaded = loadQueue().catch((err) => toast(`queue: ${err.message}`, "error"));
+  const routeLoaded = loadRoute().catch((err) => toast(`route: ${err.message}`, "error"));
   resumeTraining().catch(() => {}); // a training started before a reload goes on showing
 
   const wanted = new URLSearchParams(window.location.search).get("segment");
@@ -684,7 +693,7 @@ async function init() {
   }
   renderDetail();
   setInterval(pollSelection, SELECTION_POLL_MS);
-  await queueLoaded;
+  await Promise.all([queueLoaded, routeLoaded]);
   document.body.dataset.state = "ready";
 }
 

@@ -1,7 +1,8 @@
 """The review app in a real browser (Debian's Chromium, driven by Playwright).
 
-Opens the app, sees the 3D scene connect, relabels with the keyboard, kills and restarts the
-server and finds the label still there, fine-tunes a model and activates it, and uses the crop
+Opens the app, sees the 3D scene connect, relabels with the keyboard, picks a segment on the
+camera image, flies to guardrail runs from the route overview, kills and restarts the server and
+finds the label still there, fine-tunes a model and activates it, and uses the crop
 gallery's keys. Screenshots go to the test's folder (and to ``$GUARDRAIL_SCREENSHOTS`` when set).
 
 Every step waits on the state it then asserts, never on time: the page's ``<body data-state>``
@@ -214,6 +215,34 @@ def test_review_app_in_the_browser(
         expect(page.locator("#camera-figure")).to_be_hidden()
         page.keyboard.press("i")
         expect(page.locator("#camera-figure")).to_be_visible()
+
+        # The route overview lists the runs in order along the drive, coloured by review state
+        # (the run of the segment relabelled above is "changed"), and flies to one: a click on
+        # a row selects that run's segment to look at, which the 3D scene follows; [ goes back.
+        runs = _get(f"{server.url}/api/overview")["runs"]
+        assert len(runs) >= 2 and any(r["state"] == "changed" for r in runs)
+        rows = page.locator("#route-table tbody tr")
+        expect(rows).to_have_count(len(runs))
+        for k, run in enumerate(runs):
+            expect(rows.nth(k)).to_have_attribute("data-run", str(run["run_id"]))
+            expect(rows.nth(k)).to_have_attribute("data-state", run["state"])
+        expect(page.locator("#route-map polyline.route-run")).to_have_count(len(runs))
+        for k, key in ((1, None), (0, "[")):
+            done = int(body.get_attribute("data-actions") or 0)
+            with page.expect_response(_api("PUT", "/api/selection")) as answer:
+                if key is None:
+                    rows.nth(k).click()
+                else:
+                    page.locator("#selected-id").click()
+                    page.keyboard.press(key)
+            assert answer.value.ok, answer.value.text()
+            expect(body).to_have_attribute("data-actions", str(done + 1), timeout=WAIT_MS)
+            target = runs[k]["segment"]
+            expect(page.locator("#selected-id")).to_have_text(str(target))
+            assert _get(f"{server.url}/api/selection")["segments"] == [target]
+            expect(rows.nth(k)).to_have_class(re.compile(r"\bcurrent\b"))
+            expect(scene).to_contain_text(re.compile(rf"Segment {target}\b"), timeout=WAIT_MS)
+        page.locator("#route-panel").screenshot(path=shots / "route.png")
 
         # A crash of the server loses no label: kill it, start it again, reload.
         server.kill()

@@ -1,0 +1,142 @@
+"""The route at a glance: the trajectory, every reconstructed guardrail run on it, and how far
+the operators have reviewed each run.
+
+A run's place is its poles in order (the reconstruction's ``models.json``, local metres). A
+segment belongs to the run whose pole line passes nearest its centroid, within
+:data:`RUN_REACH_M` horizontally: segments carry no run id (runs group guardrail points by
+distance, §4.1), and a segment of a run lies on the line of its poles. The segments that count
+are those the model or an operator calls guardrail, and every reviewed one.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from app.session import ReviewSession
+from guardrail_core.errors import GuardrailError
+from guardrail_core.formats.drive_tiles import vehicle_station
+from guardrail_core.reconstruct.inventory import inventory_rows
+from guardrail_core.reconstruct.model_json import run_model_from_json
+from guardrail_core.review.queue import queue_scores
+
+#: Metres (horizontal): how far from its run's pole line a segment's centroid may lie.
+RUN_REACH_M = 1.5
+#: Metres between the samples of a run's pole line that segments are matched against.
+LINE_STEP_M = 0.25
+#: The most trajectory vertices sent (the map needs no more).
+TRAJECTORY_VERTICES = 2000
+
+UNREVIEWED, REVIEWED, CHANGED = "unreviewed", "reviewed", "changed"
+
+
+@dataclass(frozen=True)
+class RunPlace:
+    """A reconstructed run on the map."""
+
+    row: dict  # its inventory row (:func:`guardrail_core.reconstruct.inventory.inventory_rows`)
+    path: np.ndarray  # (P, 2) float64, its poles in order, local metres
+    station_m: float  # the vehicle's station nearest its first pole
+
+
+def run_places(session: ReviewSession) -> list[RunPlace]:
+    """Every reconstructed run with at least one pole, in order along the drive; empty for a
+    run folder without a reconstruction."""
+    try:
+        document = session.folder.reconstruction.read_models()
+    except GuardrailError:
+        return []
+    models = [run_model_from_json(run) for run in document.runs]
+    rows = inventory_rows(models, session.drive.origin)
+    trajectory = session.drive.trajectory
+    station = vehicle_station(trajectory, trajectory.time)
+    tree = cKDTree(trajectory.position[:, :2])
+    places = []
+    for model, row in zip(models, rows, strict=True):
+        if not model.poles:
+            continue
+        path = np.array([p.position[:2] for p in model.poles], np.float64)
+        nearest = int(tree.query(path[0])[1])
+        places.append(RunPlace(row, path, float(station[nearest])))
+    return sorted(places, key=lambda p: (p.station_m, p.row["run_id"]))
+
+
+def segment_runs(session: ReviewSession, places: list[RunPlace]) -> np.ndarray:
+    """(S,) int64: the index in ``places`` of each segment's run, -1 for none."""
+    out = np.full(session.n_segments, -1, np.int64)
+    if not places:
+        return out
+    seg = session.run.segments
+    counted = np.flatnonzero(
+        seg["label"] | session.effective_label() | (session.operator_label >= 0)
+    )
+    samples, owner = [], []
+    for k, place in enumerate(places):
+        line = _sampled(place.path)
+        samples.append(line)
+        owner.append(np.full(len(line), k))
+    tree = cKDTree(np.concatenate(samples))
+    distance, nearest = tree.query(seg["centroid"][counted, :2], distance_upper_bound=RUN_REACH_M)
+    found = np.isfinite(distance)
+    out[counted[found]] = np.concatenate(owner)[nearest[found]]
+    return out
+
+
+def _sampled(path: np.ndarray) -> np.ndarray:
+    """(K, 2) points every :data:`LINE_STEP_M` along a polyline (P, 2), its vertices included."""
+    if len(path) == 1:
+        return path
+    parts = []
+    for a, b in zip(path[:-1], path[1:], strict=True):
+        n = max(1, int(np.ceil(np.linalg.norm(b - a) / LINE_STEP_M)))
+        parts.append(a + (b - a) * np.linspace(0.0, 1.0, n, endpoint=False)[:, None])
+    return np.concatenate([*parts, path[-1:]])
+
+
+def route_overview(session: ReviewSession) -> dict:
+    """The map and the inventory of the review app's route view (``GET /api/overview``)."""
+    places = run_places(session)
+    owner = segment_runs(session, places)
+    seg = session.run.segments
+    reviewed = session.operator_label >= 0
+    changed = reviewed & ((session.operator_label == 1) != seg["label"])
+    score = queue_scores(seg["probability"], seg["raw_label"], seg["label"])
+    runs = []
+    for k, place in enumerate(places):
+        mine = np.flatnonzero(owner == k)
+        n_reviewed = int(reviewed[mine].sum())
+        n_changed = int(changed[mine].sum())
+        todo = mine[~reviewed[mine]]
+        # Where "fly to" goes: the run's most doubtful unreviewed segment, else its first.
+        target = todo[np.argmax(score[todo])] if len(todo) else (mine[0] if len(mine) else None)
+        row = place.row
+        runs.append(
+            {
+                "run_id": row["run_id"],
+                "status": row["status"],
+                "type": row["type"],
+                "signature": row["signature"],
+                "length_m": row["length_m"],
+                "poles": row["pole_count"],
+                "station_m": round(place.station_m, 1),
+                "path": np.round(place.path, 2).tolist(),
+                "segments": len(mine),
+                "reviewed": n_reviewed,
+                "changed": n_changed,
+                "state": CHANGED if n_changed else REVIEWED if n_reviewed else UNREVIEWED,
+                "segment": None if target is None else int(target),
+            }
+        )
+    position = session.drive.trajectory.position
+    step = max(1, int(np.ceil(len(position) / TRAJECTORY_VERTICES)))
+    path = np.concatenate([position[::step, :2], position[-1:, :2]])
+    length = vehicle_station(session.drive.trajectory, session.drive.trajectory.time[-1:])
+    counted = seg["label"] | session.effective_label() | reviewed
+    return {
+        "trajectory": np.round(path, 2).tolist(),
+        "length_m": round(float(length[0]), 1),
+        "runs": runs,
+        "segments_off_runs": int((counted & (owner < 0)).sum()),
+    }

@@ -1,0 +1,121 @@
+"""The route overview: the trajectory, every reconstructed run in order along the drive, the
+segments on each run, and the review state that follows the operators' labels."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+
+from app.main import create_app
+from app.route_overview import RUN_REACH_M, run_places, segment_runs
+from app.session import ReviewSession
+from guardrail_core.formats.drive import Drive
+from guardrail_core.formats.drive_tiles import vehicle_station
+from tests.app_fixtures import copy_run, new_session
+
+
+@pytest.fixture
+def session(drive_path: Path, run_path: Path, tmp_path: Path) -> Iterator[ReviewSession]:
+    s = new_session(drive_path, copy_run(run_path, tmp_path), tmp_path / "review")
+    yield s
+    s.close()
+
+
+@pytest.fixture
+def client(session: ReviewSession) -> Iterator[TestClient]:
+    with TestClient(create_app(session)) as c:
+        yield c
+
+
+def _distance_to_line(point: np.ndarray, path: np.ndarray) -> float:
+    """Metres from a point (2,) to a polyline (P, 2)."""
+    if len(path) == 1:
+        return float(np.linalg.norm(point - path[0]))
+    a, b = path[:-1], path[1:]
+    t = np.clip(np.einsum("ij,ij->i", point - a, b - a) / np.einsum("ij,ij->i", b - a, b - a), 0, 1)
+    return float(np.min(np.linalg.norm(a + t[:, None] * (b - a) - point, axis=1)))
+
+
+def test_the_overview_lists_every_run_with_poles_in_order_along_the_drive(
+    client: TestClient, session: ReviewSession, drive: Drive
+) -> None:
+    overview = client.get("/api/overview").json()
+    models = json.loads((session.run.root / "reconstruction" / "models.json").read_text())["runs"]
+    with_poles = {m["run_id"]: m for m in models if m["poles"]}
+    runs = overview["runs"]
+    assert len(runs) >= 2, "the test street has reconstructed runs"
+    assert sorted(r["run_id"] for r in runs) == sorted(with_poles)
+    assert [r["station_m"] for r in runs] == sorted(r["station_m"] for r in runs)
+    for run in runs:
+        poles = np.array([p["position"][:2] for p in with_poles[run["run_id"]]["poles"]])
+        np.testing.assert_allclose(run["path"], poles, atol=0.006)  # rounded to the cm
+        assert run["poles"] == len(poles)
+        assert run["state"] == "unreviewed" and run["reviewed"] == run["changed"] == 0
+        assert run["segments"] > 0 and run["segment"] is not None
+    trajectory = np.array(overview["trajectory"])
+    assert len(trajectory) <= 2001
+    np.testing.assert_allclose(
+        trajectory[[0, -1]], drive.trajectory.position[[0, -1], :2], atol=0.006
+    )
+    travelled = vehicle_station(drive.trajectory, drive.trajectory.time)[-1]
+    assert overview["length_m"] == pytest.approx(travelled, abs=0.06)
+
+
+def test_each_segment_lies_on_the_run_it_is_counted_for(session: ReviewSession) -> None:
+    places = run_places(session)
+    owner = segment_runs(session, places)
+    seg = session.run.segments
+    counted = seg["label"] | session.effective_label()
+    assert (owner[~counted] == -1).all()  # nothing unreviewed that no one calls guardrail
+    on_runs = np.flatnonzero(owner >= 0)
+    assert len(on_runs) >= 0.9 * counted.sum()  # the test street's guardrails are runs
+    for s in on_runs:
+        xy = seg["centroid"][s, :2]
+        distances = [_distance_to_line(xy, place.path) for place in places]
+        assert distances[owner[s]] <= RUN_REACH_M + 0.26  # the line sampled every 0.25 m
+        assert distances[owner[s]] <= min(distances) + 0.26
+    assert session.truth(on_runs).mean() >= 0.95  # and they are guardrails
+
+
+def test_the_review_state_follows_the_labels(client: TestClient) -> None:
+    runs = client.get("/api/overview").json()["runs"]
+    first, second = runs[0], runs[1]
+    detail = client.get(f"/api/segments/{first['segment']}").json()
+    client.put(f"/api/segments/{first['segment']}/label", json={"label": detail["model_label"]})
+    other = client.get(f"/api/segments/{second['segment']}").json()["model_label"]
+    flipped = "other" if other == "guardrail" else "guardrail"
+    client.put(f"/api/segments/{second['segment']}/label", json={"label": flipped})
+    after = {r["run_id"]: r for r in client.get("/api/overview").json()["runs"]}
+    assert after[first["run_id"]]["state"] == "reviewed"
+    assert after[first["run_id"]]["reviewed"] == 1 and after[first["run_id"]]["changed"] == 0
+    assert after[first["run_id"]]["segment"] != first["segment"]  # the next doubtful one
+    assert after[second["run_id"]]["state"] == "changed"
+    assert after[second["run_id"]]["segments"] == second["segments"]  # reviewed still counts
+    assert after[second["run_id"]]["changed"] == 1
+    client.post("/api/labels/undo")
+    client.post("/api/labels/undo")
+    again = {r["run_id"]: r for r in client.get("/api/overview").json()["runs"]}
+    assert again[first["run_id"]] == first and again[second["run_id"]] == second
+
+
+def test_a_run_folder_without_a_reconstruction_has_no_runs(
+    drive_path: Path, run_path: Path, tmp_path: Path
+) -> None:
+    run = copy_run(run_path, tmp_path)
+    shutil.rmtree(run / "reconstruction")
+    session = new_session(drive_path, run, tmp_path / "review")
+    try:
+        with TestClient(create_app(session)) as client:
+            overview = client.get("/api/overview").json()
+        assert overview["runs"] == [] and len(overview["trajectory"]) > 1
+        assert overview["segments_off_runs"] == int(
+            (session.run.segments["label"] | session.effective_label()).sum()
+        )
+    finally:
+        session.close()
