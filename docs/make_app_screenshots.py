@@ -1,5 +1,6 @@
 """Screenshots of the review app for the README: the 3D scene with a selected segment, the
-selected segment's panel with its camera image, the route panel, and the crop gallery.
+selected segment's panel with its camera image, the route panel, the tuning panel with a run's
+histogram, and the crop gallery.
 
 Serves a drive (default: the demo's) with ``guardrail serve`` on free ports, drives Debian's
 Chromium with Playwright and writes PNGs into ``docs/images/``. Labels go to a temporary review
@@ -12,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import socket
 import subprocess
 import sys
@@ -119,12 +121,26 @@ def shoot(url: str, segment: int) -> None:
         page.locator("#route-panel").scroll_into_view_if_needed()
         page.locator("#route-panel").screenshot(path=IMAGES / "app_route.png")
 
+        # The tuning panel: a pipe run with vertical pipes, its histogram and threshold.
+        scene.get_by_text("Connected").wait_for(timeout=60_000)  # again, after the reload
+        panel = scene.get_by_text("Reconstruction", exact=True)
+        panel.click()
+        scene.locator('input[aria-haspopup="listbox"][value^="run "]').click()
+        runs = page.evaluate("fetch('/api/overview').then((r) => r.json())")["runs"]
+        verticals = [r for r in runs if r["signature"] and "vertical" in r["signature"]]
+        wanted = f"run {verticals[0]['run_id']} " if verticals else "(pipe,"
+        scene.get_by_role("option", name=re.compile(re.escape(wanted))).first.click()
+        scene.get_by_text(re.compile(r"threshold [0-9.]+ points/bin")).wait_for(timeout=30_000)
+        folder = scene.locator(".mantine-Paper-root").filter(has_text="Apply to the whole drive")
+        folder.last.screenshot(path=IMAGES / "app_tuning.png")
+
         page.goto(f"{url}/gallery")
         page.wait_for_selector("#gallery-grid .crop", timeout=30_000)
         time.sleep(3)
         page.screenshot(path=IMAGES / "app_gallery.png")
         browser.close()
-    print(f"wrote {IMAGES}/app_review.png, app_camera.png, app_route.png and app_gallery.png")
+    names = ("app_review", "app_camera", "app_route", "app_tuning", "app_gallery")
+    print(f"wrote {', '.join(name + '.png' for name in names)} into {IMAGES}")
 
 
 if __name__ == "__main__":

@@ -10,7 +10,7 @@ import viser
 
 from app.scene.colours import GUARDRAIL, OTHER, SELECTED, point_colours, probability_colours
 from app.scene.picking import in_rectangle, pick_along_ray, project_to_screen
-from app.scene.tuning import RunTuner, with_value
+from app.scene.tuning import RunTuner, unit_numbers, with_value
 from app.scene.viewer import ReviewScene
 from app.scene.window import window_points
 from app.session import ReviewSession
@@ -163,3 +163,50 @@ def test_retuning_a_run_changes_its_model_and_keeps_the_run_folder(
     chosen = scene._chosen_run()
     assert chosen is not None and chosen in scene._ghosts  # the previous mesh, ghosted
     assert chosen in scene._shown_mesh
+
+
+def test_the_tuning_panel_plots_each_run_s_histogram_or_section(
+    scene: ReviewScene, session: ReviewSession
+) -> None:
+    """The chosen run's x histogram with its threshold and its vertical pipes marked (pipes), or
+    its section curve (beams), redrawn when a slider moves: the numbers of the histogram route."""
+    tuner = RunTuner(session.run.root)
+    runs = tuner.tunable_runs()
+    options = list(scene._run_choice.options)
+    assert len(options) == len(runs) >= 1
+    pipe_runs = 0
+    for option, run in zip(options, runs, strict=True):
+        scene._run_choice.value = option
+        scene.show_unit_plot()
+        expected = unit_numbers(run.run_id, tuner.unit(run.run_id, tuner.params), tuner.params)
+        assert f"run {run.run_id}:" in scene._tune_text.content
+        if expected["x_m"] is None:  # a beam: its section, no histogram
+            assert scene._section.visible and not scene._histogram.visible
+            z_by_height = np.asarray(expected["section"])
+            z_by_height = z_by_height[np.argsort(z_by_height[:, 1], kind="stable")]
+            np.testing.assert_allclose(scene._section.data[0], z_by_height[:, 1])
+            np.testing.assert_allclose(scene._section.data[1], z_by_height[:, 0])
+            continue
+        pipe_runs += 1
+        assert scene._histogram.visible and not scene._section.visible
+        x, counts, threshold, marked = scene._histogram.data
+        np.testing.assert_allclose(x, expected["x_m"])
+        np.testing.assert_allclose(counts, expected["counts"])
+        assert np.all(threshold == expected["threshold"])
+        assert f"threshold {expected['threshold']:.1f}" in scene._tune_text.content
+        verticals = [p for p in expected["pipes"] if p["kind"] == "vertical"]
+        half = expected["bin_m"] / 2
+        inside = np.zeros(len(x), bool)
+        for pipe in verticals:
+            inside |= (x >= pipe["x_min_m"] - half) & (x <= pipe["x_max_m"] + half)
+        np.testing.assert_allclose(marked, np.where(inside, counts, 0.0))
+        # A slider moved: the plot follows with the new factor's threshold.
+        factor = scene._sliders[("pipes", "histogram_factor")]
+        old = factor.value
+        factor.value = 5.0 if old < 5.0 else 2.0
+        scene.retune()
+        params = with_value(tuner.params, "pipes", "histogram_factor", factor.value)
+        moved = unit_numbers(run.run_id, tuner.unit(run.run_id, params), params)
+        assert scene._histogram.data[2][0] == moved["threshold"] != expected["threshold"]
+        factor.value = old
+    assert 1 <= pipe_runs < len(runs), "the test street has pipe runs and a beam run"

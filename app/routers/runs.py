@@ -4,11 +4,10 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-import numpy as np
 from fastapi import APIRouter, Depends, HTTPException, Query
 
 from app.dependencies import get_session
-from app.scene.tuning import TUNABLE, RunTuner, with_value
+from app.scene.tuning import TUNABLE, RunTuner, unit_numbers, with_value
 from app.schemas import NOT_FOUND, RunHistogram
 from app.session import ReviewSession
 from guardrail_core.errors import ReconstructionError, RunFolderError
@@ -54,26 +53,4 @@ def get_histogram(
         unit = tuner.unit(run_id, params)
     except ReconstructionError as exc:
         raise HTTPException(404, detail=f"run {run_id}: {exc}") from exc
-    histogram = unit.histogram
-    model = unit.model
-    return {
-        "run_id": run_id,
-        "type": model.type,
-        "histogram_factor": params.pipes.histogram_factor,
-        "bin_m": params.pipes.histogram_bin_m,
-        "x_m": None
-        if histogram is None
-        else (0.5 * (histogram.edges[:-1] + histogram.edges[1:])).tolist(),
-        "counts": None if histogram is None else histogram.counts.astype(int).tolist(),
-        "threshold": None if histogram is None else float(histogram.threshold),
-        "pipes": [
-            {
-                "kind": pipe.kind,
-                "x_min_m": float(np.min(pipe.axis[:, 0])),
-                "x_max_m": float(np.max(pipe.axis[:, 0])),
-                "radius_m": float(pipe.radius),
-            }
-            for pipe in model.pipes
-        ],
-        "section": None if model.section is None else np.asarray(model.section).tolist(),
-    }
+    return unit_numbers(run_id, unit, params)

@@ -132,3 +132,33 @@ class RunTuner:
             n_units=run.model.n_units,
             params=params,
         )
+
+
+def unit_numbers(run_id: int, unit: UnitReconstruction, params: ReconstructionParams) -> dict:
+    """The numbers behind a run's unit-model thresholds (§4.3, Fig. 14), as
+    ``GET /api/runs/{run_id}/histogram`` sends them and the tuning panel plots them: the x
+    histogram's bin centres, counts and threshold with the pipes found (pipes), or the section
+    curve (beams)."""
+    histogram = unit.histogram
+    model = unit.model
+    return {
+        "run_id": run_id,
+        "type": model.type,
+        "histogram_factor": params.pipes.histogram_factor,
+        "bin_m": params.pipes.histogram_bin_m,
+        "x_m": None
+        if histogram is None
+        else (0.5 * (histogram.edges[:-1] + histogram.edges[1:])).tolist(),
+        "counts": None if histogram is None else histogram.counts.astype(int).tolist(),
+        "threshold": None if histogram is None else float(histogram.threshold),
+        "pipes": [
+            {
+                "kind": pipe.kind,
+                "x_min_m": float(np.min(pipe.axis[:, 0])),
+                "x_max_m": float(np.max(pipe.axis[:, 0])),
+                "radius_m": float(pipe.radius),
+            }
+            for pipe in model.pipes
+        ],
+        "section": None if model.section is None else np.asarray(model.section).tolist(),
+    }

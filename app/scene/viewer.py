@@ -25,7 +25,7 @@ from app.jobs import JobBusyError, JobRunner
 from app.run_tiles import TilePoints
 from app.scene.colours import COLOUR_MODES, point_colours
 from app.scene.picking import in_rectangle, pick_along_ray, project_to_screen
-from app.scene.tuning import TUNABLE, RunTuner, slider_value, with_value
+from app.scene.tuning import TUNABLE, RunTuner, slider_value, unit_numbers, with_value
 from app.scene.window import window_points
 from app.session import ReviewSession
 from guardrail_core.errors import GuardrailError, RunFolderError
@@ -338,19 +338,32 @@ class ReviewScene:
                 slider.on_update(lambda _: self._schedule_tune())
                 self._sliders[(stage, name)] = slider
             self._histogram = gui.add_uplot(
-                data=(np.zeros(2), np.zeros(2), np.zeros(2)),
+                data=(np.zeros(2), np.zeros(2), np.zeros(2), np.zeros(2)),
                 series=(
                     {"label": "x (m)"},
                     {"label": "points per bin", "stroke": "#4e79a7", "fill": "#4e79a733"},
                     {"label": "threshold", "stroke": "#e15759", "dash": (6.0, 4.0)},
+                    {"label": "vertical pipes", "stroke": "#f28e2b", "fill": "#f28e2b88"},
                 ),
                 title="x histogram (vertical pipes)",
+                scales={"x": {"time": False}},  # metres, not a time axis
                 aspect=2.0,
+            )
+            self._section = gui.add_uplot(
+                data=(np.zeros(2), np.zeros(2)),
+                series=(
+                    {"label": "height y (m)"},
+                    {"label": "depth z (m)", "stroke": "#4e79a7", "width": 2.0},
+                ),
+                title="beam section (depth by height)",
+                scales={"x": {"time": False}},
+                aspect=2.0,
+                visible=False,
             )
             self._tune_text = gui.add_markdown("")
             apply = gui.add_button("Apply to the whole drive")
 
-        self._run_choice.on_update(lambda _: self._schedule_tune())
+        self._run_choice.on_update(lambda _: self._on_run_chosen())
         apply.on_click(lambda _: self.apply_tuning())
 
     def _show_selection(self) -> None:
@@ -393,6 +406,7 @@ class ReviewScene:
                     slider.value = getattr(getattr(params, stage), name)
         finally:
             self._quiet_sliders = False
+        self.show_unit_plot()
 
     def _chosen_run(self) -> int | None:
         value = self._run_choice.value
@@ -451,24 +465,67 @@ class ReviewScene:
             color=TUNED_COLOUR,
         )
         self._shown_mesh[run_id] = mesh
-        histogram = result.unit.histogram
-        if histogram is not None:
-            centres = 0.5 * (histogram.edges[:-1] + histogram.edges[1:])
-            self._histogram.data = (
-                centres,
-                histogram.counts.astype(np.float64),
-                np.full(len(centres), histogram.threshold),
-            )
-        model = result.unit.model
-        what = (
-            f"{len(model.pipes)} pipes: "
-            + ", ".join(f"{p.kind} r{1000 * p.radius:.0f} mm" for p in model.pipes)
-            if model.type == "pipe"
-            else f"beam section of {0 if model.section is None else len(model.section)} points"
-        )
         self.last_tune_seconds = result.seconds
-        self._tune_text.content = f"run {run_id}: {what} · {1000 * result.seconds:.0f} ms"
+        self._plot_unit(unit_numbers(run_id, result.unit, self.slider_params()), result.seconds)
         return result.seconds
+
+    def _on_run_chosen(self) -> None:
+        """Plot the chosen run's histogram (or section) as its model has it, then re-run it
+        with the sliders' values."""
+        if not self._quiet_sliders:
+            self.show_unit_plot()
+            self._schedule_tune()
+
+    def show_unit_plot(self) -> None:
+        """Plot the chosen run's x histogram with its threshold and vertical pipes (pipes) or
+        its section curve (beams), with the sliders' values; no mesh changes."""
+        run_id = self._chosen_run()
+        if self._tuner is None or run_id is None:
+            return
+        params = self.slider_params()
+        try:
+            unit = self._tuner.unit(run_id, params)
+        except (GuardrailError, ValueError, KeyError) as exc:
+            self._tune_text.content = f"**Not re-run:** {exc}"
+            return
+        self._plot_unit(unit_numbers(run_id, unit, params), None)
+
+    def _plot_unit(self, numbers: dict[str, Any], seconds: float | None) -> None:
+        """Show ``unit_numbers``: the histogram or the section, and a line of text."""
+        run_id = numbers["run_id"]
+        if numbers["x_m"] is not None:
+            x = np.asarray(numbers["x_m"], np.float64)
+            counts = np.asarray(numbers["counts"], np.float64)
+            half = 0.5 * numbers["bin_m"]
+            marked = np.zeros(len(x))
+            for pipe in numbers["pipes"]:
+                if pipe["kind"] == "vertical":
+                    inside = (x >= pipe["x_min_m"] - half) & (x <= pipe["x_max_m"] + half)
+                    marked[inside] = counts[inside]
+            self._histogram.data = (x, counts, np.full(len(x), numbers["threshold"]), marked)
+        if numbers["section"] is not None:
+            section = np.asarray(numbers["section"], np.float64).reshape(-1, 2)  # [z, y]
+            order = np.argsort(section[:, 1], kind="stable")
+            self._section.data = (section[order, 1], section[order, 0])
+        self._histogram.visible = numbers["x_m"] is not None
+        self._section.visible = numbers["section"] is not None
+        pipes = numbers["pipes"]
+        if numbers["type"] == "pipe":
+            kinds = sorted({p["kind"] for p in pipes})
+            what = f"{len(pipes)} pipes: " + ", ".join(
+                _pipe_kind(kind, [1000 * p["radius_m"] for p in pipes if p["kind"] == kind])
+                for kind in kinds
+            )
+        else:
+            n = 0 if numbers["section"] is None else len(numbers["section"])
+            what = f"beam section of {n} points"
+        if numbers["threshold"] is not None:
+            what += (
+                f" · threshold {numbers['threshold']:.1f} points/bin "
+                f"(factor {numbers['histogram_factor']:.1f})"
+            )
+        timing = "" if seconds is None else f" · {1000 * seconds:.0f} ms"
+        self._tune_text.content = f"run {run_id}: {what}{timing}"
 
     def apply_tuning(self) -> None:
         """Reconstruct the whole drive with the sliders' values (a background job); the new
@@ -482,6 +539,12 @@ class ReviewScene:
             self._tune_text.content = f"not now: {exc}"
             return
         self._tune_text.content = f"reconstructing the drive (job {job.id})…"
+
+
+def _pipe_kind(kind: str, radii_mm: list[float]) -> str:
+    """``"15 vertical r10-11 mm"``: the pipes of one kind and their radii."""
+    lo, hi = round(min(radii_mm)), round(max(radii_mm))
+    return f"{len(radii_mm)} {kind} r{lo}{'' if lo == hi else f'-{hi}'} mm"
 
 
 def _mesh_node(run_id: int, *, ghost: bool = False) -> str:

@@ -1,7 +1,8 @@
 """The review app in a real browser (Debian's Chromium, driven by Playwright).
 
 Opens the app, sees the 3D scene connect, relabels with the keyboard, picks a segment on the
-camera image, flies to guardrail runs from the route overview, kills and restarts the server and
+camera image, flies to guardrail runs from the route overview, moves a threshold's slider and sees the histogram
+redrawn, kills and restarts the server and
 finds the label still there, fine-tunes a model and activates it, and uses the crop
 gallery's keys. Screenshots go to the test's folder (and to ``$GUARDRAIL_SCREENSHOTS`` when set).
 
@@ -243,6 +244,29 @@ def test_review_app_in_the_browser(
             expect(rows.nth(k)).to_have_class(re.compile(r"\bcurrent\b"))
             expect(scene).to_contain_text(re.compile(rf"Segment {target}\b"), timeout=WAIT_MS)
         page.locator("#route-panel").screenshot(path=shots / "route.png")
+
+        # Tune a pipe run in the scene's panel: its x histogram and threshold are drawn, and
+        # when the threshold's slider moves one step the plot is redrawn with the threshold the
+        # histogram route gives for the new factor.
+        frame = page.frame_locator("#scene")
+        frame.get_by_text("Reconstruction", exact=True).click()
+        frame.locator('input[aria-haspopup="listbox"][value^="run "]').click()
+        frame.get_by_role("option", name=re.compile(r"\(pipe,")).first.click()
+        tuned = re.compile(r"run (\d+): .* threshold ([0-9.]+) points/bin \(factor ([0-9.]+)\)")
+        expect(scene).to_contain_text(tuned, timeout=WAIT_MS)
+        run_id, threshold, factor = tuned.search(scene.inner_text()).groups()  # type: ignore[union-attr]
+        histogram = _get(f"{server.url}/api/runs/{run_id}/histogram?histogram_factor={factor}")
+        assert f"{histogram['threshold']:.1f}" == threshold
+        slider = frame.get_by_role("slider").first  # the threshold's factor, 0.1 a step
+        slider.focus()
+        page.keyboard.press("ArrowRight")
+        moved = f"{float(factor) + 0.1:.1f}"
+        histogram = _get(f"{server.url}/api/runs/{run_id}/histogram?histogram_factor={moved}")
+        assert f"{histogram['threshold']:.1f}" != threshold  # the factor text changes either way
+        expect(scene).to_contain_text(
+            f"threshold {histogram['threshold']:.1f} points/bin (factor {moved})", timeout=WAIT_MS
+        )
+        page.screenshot(path=shots / "tuning.png")
 
         # A crash of the server loses no label: kill it, start it again, reload.
         server.kill()
