@@ -331,6 +331,10 @@ class Queue(ResponseModel):
 
 class Selection(ResponseModel):
     segments: list[int] = Field(description="the selected segment ids, shared with the 3D view")
+    lasso_points: int = Field(
+        description="the points a lasso in the 3D view took (0: whole segments are selected); "
+        "POST /api/labels/lasso labels them"
+    )
 
 
 # -- jobs and models ----------------------------------------------------------------------------

@@ -106,6 +106,7 @@ class ReviewSession:
         segments, label = self.tiles.operator_labels(*self.store.labelled())
         self.operator_label[segments] = label
         self.selection = np.zeros(0, np.int64)
+        self.lasso = np.zeros(0, np.int64)  # (L,) drive points of the last lasso, or none
         self._listeners: list[Listener] = []
 
     # -- state ------------------------------------------------------------------------------
@@ -206,11 +207,52 @@ class ReviewSession:
         return self.store.labels_at(points)
 
     def select(self, segments: Sequence[int] | np.ndarray) -> np.ndarray:
+        """Select whole segments (a lasso's points are let go)."""
         ids = np.unique(self.check_segments(segments))
         with self.lock:
             self.selection = ids
+            self.lasso = np.zeros(0, np.int64)
         self.notify("selection", ids)
         return ids
+
+    def select_points(self, points: np.ndarray) -> np.ndarray:
+        """Select the drive points a lasso took (points in no segment are left out); the
+        selection becomes their segments. Returns the segments."""
+        points = np.unique(np.asarray(points, np.int64))
+        segment = self.tiles.segment_of(points)
+        ids = np.unique(segment[segment >= 0]).astype(np.int64)
+        with self.lock:
+            self.lasso = points[segment >= 0]
+            self.selection = ids
+        self.notify("selection", ids)
+        return ids
+
+    def relabel_lasso(self, label: str, *, who: str | None = None) -> Relabel:
+        """Give the lasso's points (not their whole segments) the operator label ``label``.
+
+        Raises
+        ------
+        InvalidOptionError
+            No lasso is selected, or the label is not guardrail or other.
+        """
+        if label not in LABEL_VALUES:
+            raise InvalidOptionError(f"label: expected 'guardrail' or 'other', got {label!r}")
+        with self.lock:
+            points = self.lasso
+            if len(points) == 0:
+                raise InvalidOptionError("no lasso is selected: draw one in the 3D view first")
+            ids = self.tiles.segments_of(points)
+            change = self.store.set_labels(
+                points,
+                LABEL_VALUES[label],
+                who=who or self.operator,
+                model_version=self.models.active_version,
+                segments=[int(s) for s in ids],
+                note=f"lasso of {len(points)} points",
+            )
+            self._refresh(ids)
+        self.notify("labels", ids)
+        return Relabel(change, ids)
 
     # -- models -----------------------------------------------------------------------------
 

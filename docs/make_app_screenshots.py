@@ -1,6 +1,6 @@
 """Screenshots of the review app for the README: the 3D scene with a selected segment, the
 selected segment's panel with its camera image, the route panel, the tuning panel with a run's
-histogram, and the crop gallery.
+histogram, a lasso's points, and the crop gallery.
 
 Serves a drive (default: the demo's) with ``guardrail serve`` on free ports, drives Debian's
 Chromium with Playwright and writes PNGs into ``docs/images/``. Labels go to a temporary review
@@ -134,12 +134,26 @@ def shoot(url: str, segment: int) -> None:
         folder = scene.locator(".mantine-Paper-root").filter(has_text="Apply to the whole drive")
         folder.last.screenshot(path=IMAGES / "app_tuning.png")
 
+        # A lasso around points in the 3D view (left of the floating panel), closed: the points
+        # taken turn magenta and the page says what g and o will label.
+        scene.get_by_role("button", name="Lasso points").click()
+        canvas = scene.locator("canvas[data-engine]")
+        box = canvas.bounding_box()
+        assert box is not None
+        for fx, fy in ((0.30, 0.55), (0.50, 0.50), (0.56, 0.80), (0.36, 0.88)):
+            canvas.click(position={"x": fx * box["width"], "y": fy * box["height"]})
+        scene.get_by_role("button", name="Close the lasso").click()
+        page.wait_for_selector("#lasso-line:not([hidden])", timeout=30_000)
+        page.evaluate("document.querySelector('.side-panel').scrollTop = 0")
+        time.sleep(4)  # software WebGL redraws the new colours slowly
+        page.screenshot(path=IMAGES / "app_lasso.png")
+
         page.goto(f"{url}/gallery")
         page.wait_for_selector("#gallery-grid .crop", timeout=30_000)
         time.sleep(3)
         page.screenshot(path=IMAGES / "app_gallery.png")
         browser.close()
-    names = ("app_review", "app_camera", "app_route", "app_tuning", "app_gallery")
+    names = ("app_review", "app_camera", "app_route", "app_tuning", "app_lasso", "app_gallery")
     print(f"wrote {', '.join(name + '.png' for name in names)} into {IMAGES}")
 
 

@@ -157,12 +157,42 @@ def test_queue_puts_disagreement_and_uncertainty_first(client: TestClient, sessi
 
 
 def test_selection_round_trip(client: TestClient, session: ReviewSession) -> None:
-    assert client.put("/api/selection", json={"segments": [3, 1, 3]}).json() == {"segments": [1, 3]}
-    assert client.get("/api/selection").json() == {"segments": [1, 3]}
+    both = {"segments": [1, 3], "lasso_points": 0}
+    assert client.put("/api/selection", json={"segments": [3, 1, 3]}).json() == both
+    assert client.get("/api/selection").json() == both
     heard = []
     session.subscribe(lambda event, ids: heard.append((event, list(ids))))
     client.put("/api/selection", json={"segments": [2]})
     assert heard == [("selection", [2])]
+
+
+def test_a_lasso_s_points_are_labelled_alone_and_undone(
+    client: TestClient, session: ReviewSession
+) -> None:
+    """The 3D scene's lasso selects points (app.scene.viewer.ReviewScene.close_lasso); the
+    page labels them through POST /api/labels/lasso: those points only, one undoable batch."""
+    assert client.post("/api/labels/lasso", json={"label": "guardrail"}).status_code == 409
+    big = int(np.argmax(session.run.segments["n_points"]))
+    points = session.tiles.points_of([big, big + 1])
+    half = points[::2]  # half of two segments' points, and a road point left out
+    road = int(np.flatnonzero(session.folder.point_segment() == -1)[0])
+    segments = session.select_points(np.append(half, road))
+    assert segments.tolist() == [big, big + 1]
+    assert client.get("/api/selection").json() == {
+        "segments": [big, big + 1],
+        "lasso_points": len(half),
+    }
+    answer = client.post("/api/labels/lasso", json={"label": "other"}).json()
+    assert answer["changed_points"] == len(half)
+    assert [row["id"] for row in answer["segments"]] == [big, big + 1]
+    assert (session.store.labels_at(half) == 0).all()
+    assert (session.store.labels_at(np.setdiff1d(points, half)) == -1).all()
+    assert session.store.counts()["labelled_points"] == len(half)
+    assert client.post("/api/labels/undo").json()["changed_points"] == len(half)
+    assert session.store.counts()["labelled_points"] == 0
+    client.put("/api/selection", json={"segments": [big]})  # lets the lasso go
+    assert client.get("/api/selection").json()["lasso_points"] == 0
+    assert client.post("/api/labels/lasso", json={"label": "other"}).status_code == 409
 
 
 def test_crops_are_served_and_missing_ones_are_404(client: TestClient, session: ReviewSession):

@@ -3,17 +3,20 @@
 from __future__ import annotations
 
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 import viser
+import viser.transforms as vtf
 
 from app.scene.colours import GUARDRAIL, OTHER, SELECTED, point_colours, probability_colours
-from app.scene.picking import in_rectangle, pick_along_ray, project_to_screen
+from app.scene.picking import in_polygon, in_rectangle, pick_along_ray, project_to_screen
 from app.scene.tuning import RunTuner, unit_numbers, with_value
 from app.scene.viewer import ReviewScene
 from app.scene.window import window_points
 from app.session import ReviewSession
+from guardrail_core.errors import InvalidOptionError
 from guardrail_core.formats.drive import Drive
 from guardrail_core.formats.drive_tiles import vehicle_station
 from tests.app_fixtures import copy_run, new_session
@@ -55,6 +58,26 @@ def test_projection_matches_a_pinhole_camera() -> None:
     assert front.tolist() == [True, True, False]
     inside = in_rectangle(uv, front, np.array([0.4, 0.4]), np.array([0.6, 0.6]))
     assert inside.tolist() == [True, False, False]
+
+
+def test_a_lasso_polygon_holds_what_it_winds_round_once() -> None:
+    """Even-odd: inside a square and a concave L, outside the L's notch; a figure-eight's two
+    loops are both inside; points behind the camera never are."""
+    rng = np.random.default_rng(2)
+    uv = rng.random((4000, 2))
+    front = np.ones(len(uv), bool)
+    square = np.array([[0.2, 0.2], [0.8, 0.2], [0.8, 0.8], [0.2, 0.8]])
+    expected = np.all((uv > 0.2) & (uv < 0.8), axis=1)
+    np.testing.assert_array_equal(in_polygon(uv, front, square), expected)
+    ell = np.array([[0.1, 0.1], [0.9, 0.1], [0.9, 0.4], [0.4, 0.4], [0.4, 0.9], [0.1, 0.9]])
+    in_ell = (np.all((uv > 0.1) & (uv < 0.9), axis=1)) & ~((uv[:, 0] > 0.4) & (uv[:, 1] > 0.4))
+    np.testing.assert_array_equal(in_polygon(uv, front, ell), in_ell)
+    eight = np.array([[0.1, 0.1], [0.5, 0.5], [0.9, 0.1], [0.9, 0.9], [0.5, 0.5], [0.1, 0.9]])
+    probes = np.array([[0.2, 0.5], [0.8, 0.5], [0.5, 0.2], [0.5, 0.8]])
+    assert in_polygon(probes, np.ones(4, bool), eight).tolist() == [True, True, False, False]
+    behind = in_polygon(uv, np.zeros(len(uv), bool), square)
+    assert not behind.any()
+    assert not in_polygon(uv, front, square[:2]).any()  # two corners make no polygon
 
 
 def test_colours_follow_mode_and_operator_labels() -> None:
@@ -210,3 +233,73 @@ def test_the_tuning_panel_plots_each_run_s_histogram_or_section(
         assert scene._histogram.data[2][0] == moved["threshold"] != expected["threshold"]
         factor.value = old
     assert 1 <= pipe_runs < len(runs), "the test street has pipe runs and a beam run"
+
+
+def _click(client: object, screen: tuple[float, float]) -> SimpleNamespace:
+    """A scene click at a screen position of a browser's camera (its ray through that pixel)."""
+    camera = client.camera  # type: ignore[attr-defined]
+    T = np.eye(4)
+    T[:3, :3] = vtf.SO3(np.asarray(camera.wxyz)).as_matrix()
+    half = np.tan(camera.fov / 2)
+    direction = T[:3, :3] @ np.array(
+        [(2 * screen[0] - 1) * half * camera.aspect, (2 * screen[1] - 1) * half, 1.0]
+    )
+    return SimpleNamespace(
+        client=client,
+        screen_pos=screen,
+        ray_origin=tuple(camera.position),
+        ray_direction=tuple(direction),
+    )
+
+
+def test_a_lasso_selects_the_points_inside_it_and_the_page_labels_only_those(
+    scene: ReviewScene, session: ReviewSession
+) -> None:
+    """Corners clicked in the scene make a screen polygon; closing it selects the segment
+    points shown inside it as the first corner's view saw them (their segments become the
+    selection), they turn magenta alone, and labelling the lasso labels just them, undoably."""
+    camera = SimpleNamespace(
+        wxyz=(1.0, 0.0, 0.0, 0.0), position=(0.0, 0.0, 0.0), fov=1.0, aspect=1.5
+    )
+    shown = scene.shown.take(np.flatnonzero(scene.shown.segment >= 0))
+    # Look down at the middle of the window from 30 m up (OpenCV axes: z forward = world -z).
+    centre = np.median(shown.xyz, axis=0)
+    camera.wxyz = tuple(vtf.SO3.from_matrix(np.diag([1.0, -1.0, -1.0])).wxyz)
+    camera.position = tuple(centre + np.array([0.0, 0.0, 30.0]))
+    client = SimpleNamespace(camera=camera)
+    polygon = [(0.3, 0.3), (0.7, 0.3), (0.7, 0.7), (0.45, 0.55), (0.3, 0.7)]
+    scene.start_lasso()
+    for corner in polygon:
+        scene.add_lasso_corner(_click(client, corner))  # type: ignore[arg-type]
+    assert scene._lasso_line is not None
+    taken = scene.close_lasso()
+    T = np.eye(4)
+    T[:3, :3] = vtf.SO3(np.asarray(camera.wxyz)).as_matrix()
+    T[:3, 3] = camera.position
+    uv, front = project_to_screen(shown.xyz, T, camera.fov, camera.aspect)
+    expected = shown.index[in_polygon(uv, front, np.array(polygon))]
+    assert len(expected) >= 100
+    np.testing.assert_array_equal(taken, expected)
+    np.testing.assert_array_equal(session.lasso, expected)
+    np.testing.assert_array_equal(
+        session.selection, np.unique(shown.segment[np.isin(shown.index, expected)])
+    )
+    colours = scene._cloud.colors  # type: ignore[union-attr]
+    lassoed = np.isin(scene.shown.index, expected)
+    assert (colours[lassoed] == SELECTED).all() and not (colours[~lassoed] == SELECTED).all(1).any()
+    assert scene._lasso_line is None and "Lasso" in scene._selection_text.content
+
+    before = session.store.counts()["labelled_points"]
+    done = session.relabel_lasso("guardrail")
+    assert session.store.counts()["labelled_points"] == before + len(expected)
+    assert (session.store.labels_at(expected) == 1).all()
+    others = np.setdiff1d(session.tiles.points_of(session.selection), expected)
+    assert (session.store.labels_at(others) == -1).all()  # not their whole segments
+    assert done.change is not None and done.change.n_points == len(expected)
+    assert session.store.history(limit=1)[0]["note"] == f"lasso of {len(expected)} points"
+    session.undo()
+    assert (session.store.labels_at(expected) == -1).all()
+    session.select([int(session.selection[0])])  # another selection lets the lasso go
+    assert len(session.lasso) == 0
+    with pytest.raises(InvalidOptionError, match="no lasso"):
+        session.relabel_lasso("other")

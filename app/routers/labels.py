@@ -1,4 +1,4 @@
-"""Operator labels: one segment, a batch (or whole connected runs), undo."""
+"""Operator labels: one segment, a batch (or whole connected runs), a lasso's points, undo."""
 
 from __future__ import annotations
 
@@ -8,9 +8,10 @@ from fastapi import APIRouter, Depends, HTTPException, Path
 from pydantic import BaseModel, Field
 
 from app.dependencies import get_session
-from app.schemas import MAX_SEGMENT_ID, NOT_FOUND, History, Relabelled, SegmentId
+from app.schemas import CONFLICT, MAX_SEGMENT_ID, NOT_FOUND, History, Relabelled, SegmentId
 from app.segment_views import segment_rows
 from app.session import Relabel, ReviewSession
+from guardrail_core.errors import InvalidOptionError
 
 router = APIRouter(prefix="/api", tags=["labels"])
 Session = Annotated[ReviewSession, Depends(get_session)]
@@ -64,6 +65,16 @@ def put_label(
 def post_batch(session: Session, body: BatchBody) -> dict[str, Any]:
     """Label many segments (or, with ``expand="component"``, their whole connected runs)."""
     return _relabel(session, body.segments, body, body.expand)
+
+
+@router.post("/labels/lasso", response_model=Relabelled, responses=CONFLICT)
+def post_lasso(session: Session, body: LabelBody) -> dict[str, Any]:
+    """Label the points the last lasso in the 3D view took (not their whole segments); 409
+    when no lasso is selected."""
+    try:
+        return _answer(session, session.relabel_lasso(body.label, who=body.who))
+    except InvalidOptionError as exc:
+        raise HTTPException(409, detail=str(exc)) from exc
 
 
 @router.post("/labels/undo", response_model=Relabelled)

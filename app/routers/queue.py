@@ -26,16 +26,24 @@ def get_queue(session: Session, limit: Annotated[int, Query(ge=1, le=500)] = 20)
     return {"items": review_queue(session, limit)}
 
 
+def _selection(session: ReviewSession) -> dict[str, Any]:
+    with session.lock:
+        return {"segments": [int(s) for s in session.selection], "lasso_points": len(session.lasso)}
+
+
 @router.get("/selection", response_model=Selection)
 def get_selection(session: Session) -> dict[str, Any]:
-    return {"segments": [int(s) for s in session.selection]}
+    """The selected segments and, when a lasso in the 3D view made the selection, how many of
+    their points it took."""
+    return _selection(session)
 
 
 @router.put("/selection", response_model=Selection, responses=NOT_FOUND)
 def put_selection(session: Session, body: SelectionBody) -> dict[str, Any]:
-    """Select segments (the 3D view highlights them and flies to the first)."""
+    """Select segments (the 3D view highlights them and flies to the first); a lasso's points
+    are let go."""
     try:
-        ids = session.select(body.segments)
+        session.select(body.segments)
     except KeyError as exc:
         raise HTTPException(404, detail=str(exc.args[0])) from exc
-    return {"segments": [int(s) for s in ids]}
+    return _selection(session)

@@ -75,3 +75,21 @@ def in_rectangle(
     """(N,) bool: points in front of the camera whose screen position is inside the rectangle."""
     lo, hi = np.minimum(corner_min, corner_max), np.maximum(corner_min, corner_max)
     return in_front & np.all((uv >= lo) & (uv <= hi), axis=1)
+
+
+def in_polygon(uv: np.ndarray, in_front: np.ndarray, polygon: np.ndarray) -> np.ndarray:
+    """(N,) bool: points in front of the camera whose screen position (N, 2) lies inside the
+    closed ``polygon`` (V, 2) of screen positions (V >= 3; the even-odd rule, so a lasso that
+    crosses itself leaves out what it wound round twice)."""
+    polygon = np.asarray(polygon, np.float64).reshape(-1, 2)
+    inside = np.zeros(len(uv), bool)
+    if len(polygon) < 3:
+        return inside
+    u, v = uv[:, 0], uv[:, 1]
+    for (u0, v0), (u1, v1) in zip(polygon, np.roll(polygon, -1, axis=0), strict=True):
+        if v0 == v1:
+            continue  # a horizontal edge crosses no horizontal ray
+        crosses = (v0 > v) != (v1 > v)
+        at = u0 + (v - v0) * (u1 - u0) / (v1 - v0)
+        inside ^= crosses & (u < at)
+    return in_front & inside

@@ -23,8 +23,8 @@ import viser.transforms as vtf
 from app import review_jobs
 from app.jobs import JobBusyError, JobRunner
 from app.run_tiles import TilePoints
-from app.scene.colours import COLOUR_MODES, point_colours
-from app.scene.picking import in_rectangle, pick_along_ray, project_to_screen
+from app.scene.colours import COLOUR_MODES, SELECTED, point_colours
+from app.scene.picking import in_polygon, in_rectangle, pick_along_ray, project_to_screen
 from app.scene.tuning import TUNABLE, RunTuner, slider_value, unit_numbers, with_value
 from app.scene.window import window_points
 from app.session import ReviewSession
@@ -45,6 +45,14 @@ GHOST_OPACITY = 0.3
 DEBOUNCE_S = 0.15
 #: The scene folder of the reconstructed meshes.
 MESH_NODES = "/reconstruction"
+#: The lasso being drawn: its node, colour, and how far in front of the camera (metres).
+LASSO_NODE = "/lasso"
+LASSO_COLOUR = (255, 0, 220)
+LASSO_DRAW_M = 2.0
+LASSO_HELP = (
+    "**Lasso:** click the corners of a polygon around the points, then *Close the lasso*; "
+    "the page labels the points inside (g, o)."
+)
 
 
 class ReviewScene:
@@ -91,6 +99,10 @@ class ReviewScene:
         self._tuner: RunTuner | None = None
         self._tune_timer: threading.Timer | None = None
         self.last_tune_seconds: float | None = None
+        # A lasso being drawn: its corners (screen position, drawn point) and the view.
+        self._lasso: list[tuple[np.ndarray, np.ndarray]] | None = None
+        self._lasso_camera: tuple[np.ndarray, float, float] | None = None
+        self._lasso_line: viser.LineSegmentsHandle | None = None
 
         server.scene.set_up_direction("+z")
         self._build_gui()
@@ -135,8 +147,10 @@ class ReviewScene:
     def _colours(self) -> np.ndarray:
         session = self.session
         selected = np.zeros(session.n_segments, bool)
-        selected[session.selection] = True
-        return point_colours(
+        lasso = session.lasso
+        if len(lasso) == 0:
+            selected[session.selection] = True
+        colours = point_colours(
             self.mode,
             self.shown.segment,
             segment_label=session.effective_label(),
@@ -146,6 +160,9 @@ class ReviewScene:
             point_class=self.shown.point_class,
             selected=selected,
         )
+        if len(lasso):  # a lasso selects points, not whole segments
+            colours[np.isin(self.shown.index, lasso, assume_unique=True)] = SELECTED
+        return colours
 
     def recolour(self) -> float:
         """Recolour the points shown (after a relabel, a new selection or another mode);
@@ -227,6 +244,9 @@ class ReviewScene:
         return shown.take(np.flatnonzero(shown.segment >= 0))
 
     def _on_click(self, event: viser.SceneClickEvent) -> None:
+        if self._lasso is not None:
+            self.add_lasso_corner(event)
+            return
         candidates = self._segment_points()
         hit = pick_along_ray(
             candidates.xyz, np.asarray(event.ray_origin), np.asarray(event.ray_direction)
@@ -237,17 +257,94 @@ class ReviewScene:
 
     def _on_rect_select(self, event: viser.SceneRectSelectEvent) -> None:
         camera = event.client.camera
-        T = np.eye(4)
-        T[:3, :3] = vtf.SO3(np.asarray(camera.wxyz)).as_matrix()
-        T[:3, 3] = camera.position
         candidates = self._segment_points()
-        uv, in_front = project_to_screen(candidates.xyz, T, camera.fov, camera.aspect)
+        uv, in_front = project_to_screen(
+            candidates.xyz, _camera_pose(camera), camera.fov, camera.aspect
+        )
         inside = in_rectangle(
             uv, in_front, np.asarray(event.screen_min), np.asarray(event.screen_max)
         )
         segments = np.unique(candidates.segment[inside])
         if len(segments):
             self.session.select(segments)
+
+    # -- the lasso ----------------------------------------------------------------------------
+
+    def start_lasso(self) -> None:
+        """Start a lasso: each click in the scene adds a corner, *Close the lasso* selects the
+        segment points inside it, as the view showed them at the first corner."""
+        with self._lock:
+            self._lasso = []
+            self._lasso_camera = None
+        self._lasso_start.visible = False
+        self._lasso_close.visible = self._lasso_cancel.visible = True
+        self._selection_text.content = LASSO_HELP
+
+    def add_lasso_corner(self, event: viser.SceneClickEvent) -> None:
+        """One corner of the lasso: the click's screen position (the polygon's), drawn a little
+        in front of the camera along the click's ray."""
+        if self._lasso is None or event.screen_pos is None:
+            return
+        camera = event.client.camera
+        with self._lock:
+            if self._lasso_camera is None:  # the view the polygon is drawn in
+                self._lasso_camera = _camera_pose(camera), float(camera.fov), float(camera.aspect)
+            origin = np.asarray(event.ray_origin, np.float64)
+            direction = np.asarray(event.ray_direction, np.float64)
+            corner = origin + LASSO_DRAW_M * direction / np.linalg.norm(direction)
+            self._lasso.append((np.asarray(event.screen_pos, np.float64), corner))
+            self._draw_lasso()
+
+    def _draw_lasso(self) -> None:
+        corners = np.array([world for _, world in self._lasso or []]).reshape(-1, 3)
+        if len(corners) < 2:
+            return
+        closed = np.concatenate([corners, corners[:1]])
+        self._lasso_line = self.server.scene.add_line_segments(
+            LASSO_NODE,
+            points=np.stack([closed[:-1], closed[1:]], axis=1),
+            colors=LASSO_COLOUR,
+            thickness=2.0,
+            thickness_units="screen",
+        )
+
+    def close_lasso(self) -> np.ndarray:
+        """Select the segment points shown inside the lasso (their segments become the
+        selection, and the page labels the points); returns the drive points taken."""
+        with self._lock:
+            corners, view = self._lasso or [], self._lasso_camera
+            self._end_lasso()
+            if len(corners) < 3 or view is None:
+                self._selection_text.content = "A lasso needs three corners: try again."
+                return np.zeros(0, np.int64)
+            candidates = self._segment_points()
+            T, fov, aspect = view
+            uv, in_front = project_to_screen(candidates.xyz, T, fov, aspect)
+            polygon = np.array([screen for screen, _ in corners])
+            taken = candidates.index[in_polygon(uv, in_front, polygon)]
+        self._fly_on_select = False  # the operator is looking at them
+        try:
+            self.session.select_points(taken)
+        finally:
+            self._fly_on_select = True
+        return taken
+
+    def _close_lasso_clicked(self) -> None:
+        self.close_lasso()
+
+    def cancel_lasso(self) -> None:
+        with self._lock:
+            self._end_lasso()
+        self._show_selection()
+
+    def _end_lasso(self) -> None:
+        self._lasso = None
+        self._lasso_camera = None
+        if self._lasso_line is not None:
+            self._lasso_line.remove()
+            self._lasso_line = None
+        self._lasso_start.visible = True
+        self._lasso_close.visible = self._lasso_cancel.visible = False
 
     def fly_to(self, segment: int) -> None:
         """Move the window and every browser's camera to a segment."""
@@ -327,6 +424,13 @@ class ReviewScene:
 
         with gui.add_folder("Selection"):
             self._selection_text = gui.add_markdown(NO_SELECTION)
+            self._lasso_start = gui.add_button("Lasso points")
+            self._lasso_close = gui.add_button("Close the lasso", visible=False)
+            self._lasso_cancel = gui.add_button("Cancel the lasso", visible=False)
+
+        self._lasso_start.on_click(lambda _: self.start_lasso())
+        self._lasso_close.on_click(lambda _: self._close_lasso_clicked())
+        self._lasso_cancel.on_click(lambda _: self.cancel_lasso())
 
         with gui.add_folder("Reconstruction", expand_by_default=False):
             self._run_choice = gui.add_dropdown("Guardrail run", ("none",), initial_value="none")
@@ -368,6 +472,15 @@ class ReviewScene:
 
     def _show_selection(self) -> None:
         session = self.session
+        if self._lasso is not None:  # being drawn
+            self._selection_text.content = LASSO_HELP
+            return
+        if len(session.lasso):
+            self._selection_text.content = (
+                f"**Lasso:** {len(session.lasso):,} points in {len(session.selection)} "
+                "segments  \nlabel them on the page beside the scene (g, o)"
+            )
+            return
         if len(session.selection) == 0:
             self._selection_text.content = NO_SELECTION
             return
@@ -539,6 +652,14 @@ class ReviewScene:
             self._tune_text.content = f"not now: {exc}"
             return
         self._tune_text.content = f"reconstructing the drive (job {job.id})…"
+
+
+def _camera_pose(camera: viser.CameraHandle) -> np.ndarray:
+    """(4, 4) T_world_camera of a browser's camera."""
+    T = np.eye(4)
+    T[:3, :3] = vtf.SO3(np.asarray(camera.wxyz)).as_matrix()
+    T[:3, 3] = camera.position
+    return T
 
 
 def _pipe_kind(kind: str, radii_mm: list[float]) -> str:

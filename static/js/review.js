@@ -19,6 +19,7 @@ const $ = (id) => document.getElementById(id);
 const state = {
   info: null,
   selection: [], // segment ids, as the server has them
+  lassoPoints: 0, // points a lasso in the 3D view took (g and o then label those points)
   detail: null, // GET /api/segments/{selection[0]}
   queue: [],
   // Bumped on every selection change made by this page: a poll that started
@@ -156,8 +157,10 @@ async function pollSelection() {
     if (!state.info) loadInfo().catch(() => {});
     if (seq !== state.selectionSeq) return; // this page changed it meanwhile
     const ids = (sel && sel.segments) || [];
-    if (!sameIds(ids, state.selection)) {
+    const lasso = (sel && sel.lasso_points) || 0;
+    if (!sameIds(ids, state.selection) || lasso !== state.lassoPoints) {
       state.selection = ids;
+      state.lassoPoints = lasso;
       renderQueue(); // highlight
       await loadDetail();
     }
@@ -176,6 +179,7 @@ async function selectSegments(ids) {
   const detailPromise = loadDetail();
   const sel = await api.put("/api/selection", { segments: ids });
   state.selectionSeq += 1; // polls started during the PUT are stale too
+  state.lassoPoints = (sel && sel.lasso_points) || 0; // a page selection lets a lasso go
   const serverIds = (sel && sel.segments) || ids;
   if (!sameIds(serverIds, state.selection)) {
     state.selection = serverIds;
@@ -222,6 +226,11 @@ function renderDetail() {
   const d = state.detail;
   const n = state.selection.length;
   $("selection-count").textContent = n > 1 ? `(${n} selected, showing the first)` : "";
+  const lasso = $("lasso-line");
+  lasso.hidden = !state.lassoPoints;
+  lasso.textContent = state.lassoPoints
+    ? `Lasso: ${plural(state.lassoPoints, "point")} in ${plural(n, "segment")}; g and o label these points`
+    : "";
   $("selection-empty").hidden = n > 0;
   $("selection-detail").hidden = n === 0;
   if (n === 0) return;
@@ -408,6 +417,12 @@ async function labelSelection(label, expand) {
   const ids = [...state.selection];
   if (!ids.length) {
     toast("nothing selected: click a segment in the 3D view or press n", "error");
+    return;
+  }
+  if (state.lassoPoints && expand === "none") {
+    const res = await api.post("/api/labels/lasso", { label });
+    toast(`${plural(state.lassoPoints, "lasso point")} -> ${label} (${int(res.changed_points)} changed)`);
+    await afterChange();
     return;
   }
   const res = await api.post("/api/labels/batch", { segments: ids, label, expand });

@@ -2,7 +2,7 @@
 
 Opens the app, sees the 3D scene connect, relabels with the keyboard, picks a segment on the
 camera image, flies to guardrail runs from the route overview, moves a threshold's slider and sees the histogram
-redrawn, kills and restarts the server and
+redrawn, lasso-labels points and undoes it, kills and restarts the server and
 finds the label still there, fine-tunes a model and activates it, and uses the crop
 gallery's keys. Screenshots go to the test's folder (and to ``$GUARDRAIL_SCREENSHOTS`` when set).
 
@@ -267,6 +267,43 @@ def test_review_app_in_the_browser(
             f"threshold {histogram['threshold']:.1f} points/bin (factor {moved})", timeout=WAIT_MS
         )
         page.screenshot(path=shots / "tuning.png")
+
+        # Lasso points in the 3D view: its corners clicked on the scene, then closed; the page
+        # shows the lasso, g labels the points taken (not their whole segments), z undoes it.
+        frame.get_by_role("button", name="Lasso points").click()
+        canvas = frame.locator("canvas[data-engine]")  # three.js's, not viser's helpers'
+        box = canvas.bounding_box()
+        assert box is not None
+        # Left of the floating GUI panel (the right third of the scene).
+        for fx, fy in ((0.08, 0.3), (0.55, 0.3), (0.55, 0.9), (0.3, 0.6), (0.08, 0.9)):
+            canvas.click(position={"x": fx * box["width"], "y": fy * box["height"]})
+        frame.get_by_role("button", name="Close the lasso").click()
+        expect(page.locator("#lasso-line")).to_be_visible(timeout=WAIT_MS)
+        taken = _get(f"{server.url}/api/selection")["lasso_points"]
+        assert taken > 0
+        expect(scene).to_contain_text(f"Lasso: {taken:,} points")
+        expect(page.locator("#lasso-line")).to_contain_text(f"{taken:,} points")
+        before = _get(f"{server.url}/api/info")["label_counts"]
+        page.locator("#selected-id").click()
+        done = int(body.get_attribute("data-actions") or 0)
+        with page.expect_response(_api("POST", "/api/labels/lasso")) as answer:
+            page.keyboard.press("g")
+        assert answer.value.ok, answer.value.text()
+        changed = answer.value.json()["changed_points"]
+        expect(body).to_have_attribute("data-actions", str(done + 1), timeout=WAIT_MS)
+        latest = _get(f"{server.url}/api/labels/history?limit=1")["items"][0]
+        assert latest["note"] == f"lasso of {taken} points" and latest["new"] == "guardrail"
+        after = _get(f"{server.url}/api/info")["label_counts"]
+        assert after["guardrail_points"] - before["guardrail_points"] == changed > 0
+        page.screenshot(path=shots / "lasso.png")
+        with page.expect_response(_api("POST", "/api/labels/undo")) as answer:
+            page.keyboard.press("z")
+        assert answer.value.json()["changed_points"] == changed
+        expect(body).to_have_attribute("data-actions", str(done + 2), timeout=WAIT_MS)
+        assert _get(f"{server.url}/api/info")["label_counts"] == {
+            **before,
+            "batches": before["batches"] + 2,
+        }
 
         # A crash of the server loses no label: kill it, start it again, reload.
         server.kill()
