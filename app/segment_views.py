@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from app.route_overview import run_places, segment_runs
 from app.session import ReviewSession
 from guardrail_core.formats.run_folder import CROP_OK, CROP_STATUS_NAMES
 from guardrail_core.review.queue import queue_order, queue_scores, uncertainty
@@ -83,17 +84,41 @@ def filter_segments(
     return ids.astype(np.int64)
 
 
-def review_queue(session: ReviewSession, limit: int) -> list[dict[str, Any]]:
+#: A run's segments worth a look in "review this run": uncertainty 0.1 and above (probability
+#: within 0.05 of 0 or 1 is left out), or a label the correction changed.
+RUN_DOUBT_SCORE = 0.1
+
+
+def review_queue(
+    session: ReviewSession, limit: int, run: int | None = None
+) -> list[dict[str, Any]]:
     """Unreviewed segments most worth an operator's look, best first.
 
     A segment whose raw prediction and corrected label disagree (§3.3's correction changed it)
-    comes first; then the model's uncertainty orders them (1 at p = 0.5).
+    comes first; then the model's uncertainty orders them (1 at p = 0.5). With ``run``, the
+    doubtful unreviewed segments of that guardrail run (:data:`RUN_DOUBT_SCORE` and above) in
+    order along the road, as they were scanned.
+
+    Raises
+    ------
+    KeyError
+        ``run`` is not a reconstructed run with poles (the router answers 404).
     """
     seg = session.run.segments
     disagrees = seg["raw_label"] != seg["label"]
     score = queue_scores(seg["probability"], seg["raw_label"], seg["label"])
     reviewed = session.operator_label >= 0
-    order = queue_order(score, reviewed)[:limit]
+    if run is None:
+        order = queue_order(score, reviewed)[:limit]
+    else:
+        places = run_places(session)
+        found = [k for k, place in enumerate(places) if place.row["run_id"] == run]
+        if not found:
+            raise KeyError(f"no guardrail run {run} with poles")
+        on_run = segment_runs(session, places) == found[0]
+        doubtful = np.flatnonzero(on_run & ~reviewed & (score >= RUN_DOUBT_SCORE))
+        scanned = seg["time"][doubtful].mean(axis=1)
+        order = doubtful[np.argsort(scanned, kind="stable")][:limit].astype(np.int64)
     rows = segment_rows(session, order)
     for row, s in zip(rows, order, strict=True):
         row["reason"] = "disagrees" if disagrees[s] else "uncertain"

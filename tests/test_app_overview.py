@@ -14,9 +14,11 @@ from fastapi.testclient import TestClient
 
 from app.main import create_app
 from app.route_overview import RUN_REACH_M, run_places, segment_runs
+from app.segment_views import RUN_DOUBT_SCORE
 from app.session import ReviewSession
 from guardrail_core.formats.drive import Drive
 from guardrail_core.formats.drive_tiles import vehicle_station
+from guardrail_core.review.queue import queue_scores
 from tests.app_fixtures import copy_run, new_session
 
 
@@ -119,3 +121,31 @@ def test_a_run_folder_without_a_reconstruction_has_no_runs(
         )
     finally:
         session.close()
+
+
+def test_review_this_run_steps_through_its_doubtful_segments_along_the_road(
+    client: TestClient, session: ReviewSession
+) -> None:
+    places = run_places(session)
+    owner = segment_runs(session, places)
+    seg = session.run.segments
+    score = queue_scores(seg["probability"], seg["raw_label"], seg["label"])
+    walked = 0
+    for k, place in enumerate(places):
+        run_id = place.row["run_id"]
+        items = client.get(f"/api/queue?run={run_id}&limit=500").json()["items"]
+        ids = np.array([item["id"] for item in items], np.int64)
+        expected = np.flatnonzero((owner == k) & (score >= RUN_DOUBT_SCORE))
+        assert sorted(ids.tolist()) == expected.tolist()  # nothing reviewed yet
+        scanned = seg["time"][ids].mean(axis=1)
+        assert (np.diff(scanned) >= 0).all()  # along the road, as scanned
+        assert all(not item["reviewed"] for item in items)
+        walked += len(ids)
+        if len(ids):  # a labelled segment leaves the run's queue
+            client.put(f"/api/segments/{int(ids[0])}/label", json={"label": "guardrail"})
+            again = client.get(f"/api/queue?run={run_id}&limit=500").json()["items"]
+            assert [item["id"] for item in again] == ids[1:].tolist()
+    assert walked > 0, "the test street's runs have doubtful segments"
+    unknown = max(place.row["run_id"] for place in places) + 1
+    assert client.get(f"/api/queue?run={unknown}").status_code == 404
+    assert client.get("/api/queue?run=-1").status_code == 422

@@ -20,10 +20,26 @@ class SelectionBody(BaseModel):
     segments: list[SegmentId] = Field(max_length=100_000)
 
 
-@router.get("/queue", response_model=Queue)
-def get_queue(session: Session, limit: Annotated[int, Query(ge=1, le=500)] = 20) -> dict[str, Any]:
-    """Unreviewed segments, most worth a look first (disagreement, then uncertainty)."""
-    return {"items": review_queue(session, limit)}
+@router.get("/queue", response_model=Queue, responses=NOT_FOUND)
+def get_queue(
+    session: Session,
+    limit: Annotated[int, Query(ge=1, le=500)] = 20,
+    run: Annotated[
+        int | None,
+        Query(
+            ge=0,
+            le=2**31 - 1,
+            description="review this run: its doubtful unreviewed segments in order along the "
+            "road (a run of GET /api/overview)",
+        ),
+    ] = None,
+) -> dict[str, Any]:
+    """Unreviewed segments, most worth a look first (disagreement, then uncertainty); with
+    ``run``, that guardrail run's doubtful ones in order along the road."""
+    try:
+        return {"items": review_queue(session, limit, run)}
+    except KeyError as exc:
+        raise HTTPException(404, detail=str(exc.args[0])) from exc
 
 
 def _selection(session: ReviewSession) -> dict[str, Any]:

@@ -12,6 +12,7 @@ import { initRoute, loadRoute, stepRun } from "./route.js";
 const SELECTION_POLL_MS = 700;
 const JOB_POLL_MS = 500;
 const QUEUE_LIMIT = 10;
+const RUN_QUEUE_LIMIT = 200; // a run's doubtful segments, all of them in practice
 const HISTORY_SHOWN = 5;
 
 const $ = (id) => document.getElementById(id);
@@ -22,6 +23,7 @@ const state = {
   lassoPoints: 0, // points a lasso in the 3D view took (g and o then label those points)
   detail: null, // GET /api/segments/{selection[0]}
   queue: [],
+  queueRun: null, // a run_id: the queue reviews that run along the road ("review this run")
   // Bumped on every selection change made by this page: a poll that started
   // before it may carry the old selection and must be dropped.
   selectionSeq: 0,
@@ -341,14 +343,30 @@ function renderHistory(history) {
 // ---- queue --------------------------------------------------------------
 
 async function loadQueue() {
-  const res = await api.get(`/api/queue${api.query({ limit: QUEUE_LIMIT })}`);
+  const run = state.queueRun;
+  const params = run === null ? { limit: QUEUE_LIMIT } : { limit: RUN_QUEUE_LIMIT, run };
+  const res = await api.get(`/api/queue${api.query(params)}`);
+  if (run !== state.queueRun) return; // the scope changed meanwhile
   state.queue = (res && res.items) || [];
   renderQueue();
+}
+
+/** Review run `runId` along the road (null: the whole drive's queue). */
+async function setQueueRun(runId) {
+  state.queueRun = runId;
+  $("queue-panel").dataset.run = runId === null ? "" : String(runId);
+  await loadQueue();
 }
 
 function renderQueue() {
   const list = $("queue");
   list.replaceChildren();
+  const run = state.queueRun;
+  $("queue-scope").textContent = run === null ? "" : `· run ${run}, along the road`;
+  $("queue-whole").hidden = run === null;
+  $("queue-empty").textContent = run === null
+    ? "Nothing left to review."
+    : `Nothing doubtful left on run ${run}.`;
   $("queue-empty").hidden = state.queue.length > 0;
   for (const item of state.queue) {
     const li = document.createElement("li");
@@ -619,6 +637,9 @@ function onKeyDown(event) {
     case "[":
       run(() => stepRun(-1));
       break;
+    case "w":
+      run(() => setQueueRun(null));
+      break;
     case "]":
       run(() => stepRun(+1));
       break;
@@ -684,7 +705,8 @@ async function init() {
   $("train").addEventListener("click", () => run(startTraining));
   $("activate").addEventListener("click", () => run(activateNew));
   $("keep").addEventListener("click", keepCurrent);
-  initRoute(selectSegments, run);
+  initRoute(selectSegments, run, setQueueRun);
+  $("queue-whole").addEventListener("click", () => run(() => setQueueRun(null)));
 
   try {
     await loadInfo();

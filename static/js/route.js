@@ -15,15 +15,18 @@ const route = {
   current: null, // the run_id last flown to
   select: async () => {}, // selects segments on the page and the server
   run: (fn) => fn(), // runs a page action after the ones before it
+  review: async () => {}, // makes the review queue that of one run
 };
 
 /**
  * Wire the panel: `select(ids)` is the page's own selection (it moves the 3D
- * camera), `run(fn)` its queue of actions (a click is one).
+ * camera), `run(fn)` its queue of actions (a click is one), `review(runId)`
+ * makes the review queue that run's, along the road.
  */
-export function initRoute(select, run) {
+export function initRoute(select, run, review) {
   route.select = select;
   route.run = run;
+  route.review = review;
   $("route-map").addEventListener("click", onClick);
   $("route-table").addEventListener("click", onClick);
   $("route-table").addEventListener("keydown", (event) => {
@@ -49,6 +52,7 @@ export async function flyTo(runId) {
   if (!run) return;
   route.current = runId;
   renderRoute();
+  await route.review(runId);
   if (run.segment === null) {
     toast(`run ${runId} has no segment to look at`, "error");
     return;

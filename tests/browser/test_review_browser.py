@@ -243,7 +243,22 @@ def test_review_app_in_the_browser(
             assert _get(f"{server.url}/api/selection")["segments"] == [target]
             expect(rows.nth(k)).to_have_class(re.compile(r"\bcurrent\b"))
             expect(scene).to_contain_text(re.compile(rf"Segment {target}\b"), timeout=WAIT_MS)
+        # Flying to a run made the queue that run's doubtful segments along the road; w goes
+        # back to the whole drive's queue.
+        first = runs[0]["run_id"]
+        expect(page.locator("#queue-panel")).to_have_attribute("data-run", str(first))
+        along = _get(f"{server.url}/api/queue?run={first}&limit=200")["items"]
+        items = page.locator("#queue li")
+        expect(items).to_have_count(len(along))
+        for k, item in enumerate(along):
+            expect(items.nth(k)).to_have_attribute("data-id", str(item["id"]))
         page.locator("#route-panel").screenshot(path=shots / "route.png")
+        page.locator("#selected-id").click()
+        page.keyboard.press("w")
+        expect(page.locator("#queue-panel")).to_have_attribute("data-run", "")
+        whole = _get(f"{server.url}/api/queue?limit=10")["items"]
+        expect(items).to_have_count(len(whole))
+        expect(items.first).to_have_attribute("data-id", str(whole[0]["id"]))
 
         # Tune a pipe run in the scene's panel: its x histogram and threshold are drawn, and
         # when the threshold's slider moves one step the plot is redrawn with the threshold the
