@@ -20,7 +20,7 @@ from guardrail_core.errors import GuardrailError
 from guardrail_core.formats.drive_tiles import vehicle_station
 from guardrail_core.reconstruct.inventory import inventory_rows
 from guardrail_core.reconstruct.model_json import run_model_from_json
-from guardrail_core.review.queue import queue_scores
+from guardrail_core.review.queue import segment_queue_scores
 
 #: Metres (horizontal): how far from its run's pole line a segment's centroid may lie.
 RUN_REACH_M = 1.5
@@ -102,7 +102,7 @@ def route_overview(session: ReviewSession) -> dict:
     seg = session.run.segments
     reviewed = session.operator_label >= 0
     changed = reviewed & ((session.operator_label == 1) != seg["label"])
-    score = queue_scores(seg["probability"], seg["raw_label"], seg["label"])
+    score = segment_queue_scores(seg)
     runs = []
     for k, place in enumerate(places):
         mine = np.flatnonzero(owner == k)

@@ -322,7 +322,11 @@ class QueueItem(Segment):
     reason: Literal["disagrees", "uncertain"] = Field(
         description="'disagrees': the correction changed the model's label"
     )
-    score: float = Field(description="uncertainty (1 at p = 0.5) + 1 when it disagrees")
+    score: float = Field(
+        description="the change a decision is expected to make: uncertainty (1 at p = 0.5) "
+        "weighted by the points it moves and by 1.5 where it joins or splits a guardrail run, "
+        "+ 1 when it disagrees"
+    )
 
 
 class Queue(ResponseModel):

@@ -10,7 +10,13 @@ import numpy as np
 from app.route_overview import run_places, segment_runs
 from app.session import ReviewSession
 from guardrail_core.formats.run_folder import CROP_OK, CROP_STATUS_NAMES
-from guardrail_core.review.queue import queue_order, queue_scores, uncertainty
+from guardrail_core.review.queue import (
+    MIN_QUEUE_POINTS,
+    queue_order,
+    queue_scores,
+    segment_queue_scores,
+    uncertainty,
+)
 
 SORTS = ("id", "uncertainty", "probability", "-probability")
 
@@ -95,9 +101,12 @@ def review_queue(
     """Unreviewed segments most worth an operator's look, best first.
 
     A segment whose raw prediction and corrected label disagree (§3.3's correction changed it)
-    comes first; then the model's uncertainty orders them (1 at p = 0.5). With ``run``, the
-    doubtful unreviewed segments of that guardrail run (:data:`RUN_DOUBT_SCORE` and above) in
-    order along the road, as they were scanned.
+    comes first; then the change a decision is expected to make orders them: the model's
+    uncertainty (1 at p = 0.5), weighted by the points it moves and by half again where it would
+    join or split a guardrail run (:func:`guardrail_core.review.queue.segment_queue_scores`).
+    Segments of fewer than ``MIN_QUEUE_POINTS`` points are left out. With ``run``, the doubtful
+    unreviewed segments of that guardrail run (:data:`RUN_DOUBT_SCORE` and above) in order
+    along the road, as they were scanned.
 
     Raises
     ------
@@ -106,17 +115,19 @@ def review_queue(
     """
     seg = session.run.segments
     disagrees = seg["raw_label"] != seg["label"]
-    score = queue_scores(seg["probability"], seg["raw_label"], seg["label"])
+    score = segment_queue_scores(seg)  # the change a decision is expected to make
     reviewed = session.operator_label >= 0
     if run is None:
-        order = queue_order(score, reviewed)[:limit]
+        order = queue_order(score, reviewed, n_points=seg["n_points"])[:limit]
     else:
         places = run_places(session)
         found = [k for k, place in enumerate(places) if place.row["run_id"] == run]
         if not found:
             raise KeyError(f"no guardrail run {run} with poles")
         on_run = segment_runs(session, places) == found[0]
-        doubtful = np.flatnonzero(on_run & ~reviewed & (score >= RUN_DOUBT_SCORE))
+        doubt = queue_scores(seg["probability"], seg["raw_label"], seg["label"])
+        big = seg["n_points"] >= MIN_QUEUE_POINTS
+        doubtful = np.flatnonzero(on_run & ~reviewed & big & (doubt >= RUN_DOUBT_SCORE))
         scanned = seg["time"][doubtful].mean(axis=1)
         order = doubtful[np.argsort(scanned, kind="stable")][:limit].astype(np.int64)
     rows = segment_rows(session, order)

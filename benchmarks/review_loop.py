@@ -12,15 +12,18 @@ labels segments with the truth (the class of most of a segment's points) in batc
 count of ``--labels``:
 
 - ``queue``: the review queue's order (:mod:`guardrail_core.review.queue`: disagreement with the
-  label correction first, then uncertainty), ranked again after every batch from the new
-  predictions, as the app's queue is;
+  label correction first, then the expected change: uncertainty weighted by the points moved
+  and by a run's join or split; segments under 10 points left out), ranked again after every
+  batch from the new predictions, as the app's queue is;
 - ``random``: a random order (``--seed``).
 
 After each batch it fine-tunes exactly as the app's "Train" and "Activate" do
 (:func:`~guardrail_core.review.training.train_from_run` in fast mode on the reviewed labels and
 the run's corrected labels elsewhere, then :func:`~guardrail_core.review.training.predict_run`
 and :func:`~guardrail_core.review.training.write_predictions`), and measures guardrail F (after
-label correction) on the rest of the street: every segment the oracle has not labelled yet.
+label correction) on the rest of the street: every segment the oracle has not labelled yet,
+counted per segment (``guardrail_f1``) and per point (``guardrail_f1_points``: a segment weighs
+its points, so tiny segments, which the queue leaves out, count for little).
 
 Prints ``{"labels": [...], "guardrail_f1": [...]}`` per order (``--json``), or a table. Goal
 (issue 21): guardrail F >= 0.98 within 100 labels, and the queue reaching it with at most half
@@ -50,7 +53,7 @@ from guardrail_core.extract.segment_truth import segment_truth  # noqa: E402
 from guardrail_core.formats.drive import open_drive  # noqa: E402
 from guardrail_core.formats.run_folder import load_run  # noqa: E402
 from guardrail_core.process import process_drive_folder  # noqa: E402
-from guardrail_core.review.queue import queue_order, queue_scores  # noqa: E402
+from guardrail_core.review.queue import queue_order, segment_queue_scores  # noqa: E402
 from guardrail_core.review.training import (  # noqa: E402
     predict_run,
     train_from_run,
@@ -72,6 +75,15 @@ def true_segments(drive: Path, run: Path) -> np.ndarray:
     return segment_truth(truth.point_class, folder.point_segment, len(folder))
 
 
+def points_f1(truth: np.ndarray, predicted: np.ndarray, n_points: np.ndarray) -> float:
+    """Guardrail F over points: each segment (S,) counts by its points, as the map's guardrails
+    (and an operator's effort on them) do; tiny segments weigh almost nothing."""
+    n = np.asarray(n_points, np.float64)
+    tp = n[truth & predicted].sum()
+    wrong = n[truth != predicted].sum()
+    return float(2 * tp / (2 * tp + wrong)) if tp + wrong else 1.0
+
+
 def learning_curve(
     run_dir: Path, truth: np.ndarray, labels: list[int], order: str, seed: int
 ) -> dict:
@@ -81,15 +93,19 @@ def learning_curve(
     random_order = rng.permutation(len(run))
     reviewed = np.zeros(len(run), bool)
     point_labels = np.full(len(run.point_segment), -1, np.int8)
-    curve: dict[str, list] = {"labels": [], "guardrail_f1": [], "seconds": []}
+    curve: dict[str, list] = {
+        "labels": [],
+        "guardrail_f1": [],
+        "guardrail_f1_points": [],
+        "seconds": [],
+    }
     for count in labels:
         clock = time.perf_counter()
         need = count - int(reviewed.sum())
         if need > 0:
             seg = run.segments
             if order == "queue":
-                score = queue_scores(seg["probability"], seg["raw_label"], seg["label"])
-                ranked = queue_order(score, reviewed)
+                ranked = queue_order(segment_queue_scores(seg), reviewed, n_points=seg["n_points"])
             else:
                 ranked = random_order[~reviewed[random_order]]
             batch = ranked[:need]
@@ -101,8 +117,10 @@ def learning_curve(
             run = load_run(run_dir)
         rest = ~reviewed
         f1 = detection_metrics(truth[rest], run.segments["label"][rest]).guardrail.f1
+        points = points_f1(truth[rest], run.segments["label"][rest], run.segments["n_points"][rest])
         curve["labels"].append(int(reviewed.sum()))
         curve["guardrail_f1"].append(round(float(f1), 4))
+        curve["guardrail_f1_points"].append(round(points, 4))
         curve["seconds"].append(round(time.perf_counter() - clock, 1))
     reached = [
         n for n, f in zip(curve["labels"], curve["guardrail_f1"], strict=True) if f >= GOAL_F
@@ -147,9 +165,15 @@ def main() -> int:
         print(json.dumps(out, indent=1))
     else:
         print(f"{args.drive}: {out['segments']} segments ({out['guardrail_segments']} guardrail)")
-        print(f"{'labels':>8s}" + "".join(f"{o + ' F':>14s}" for o in orders))
+        print(f"{'labels':>8s}" + "".join(f"{o + ' F':>14s}{o + ' F points':>18s}" for o in orders))
         for i, n in enumerate(labels):
-            print(f"{n:>8d}" + "".join(f"{out[o]['guardrail_f1'][i]:>14.4f}" for o in orders))
+            print(
+                f"{n:>8d}"
+                + "".join(
+                    f"{out[o]['guardrail_f1'][i]:>14.4f}{out[o]['guardrail_f1_points'][i]:>18.4f}"
+                    for o in orders
+                )
+            )
         for o in orders:
             print(f"{o}: F >= {GOAL_F} after {out[o]['labels_to_goal']} labels")
     return 0

@@ -18,6 +18,7 @@ from guardrail_core.errors import InvalidOptionError
 from guardrail_core.extract.crops import CropParams, crop_window, cut_crop
 from guardrail_core.formats.drive import Drive
 from guardrail_core.formats.run_folder import load_run
+from guardrail_core.review.queue import MIN_QUEUE_POINTS, segment_queue_scores
 from tests.app_fixtures import copy_run, new_session
 
 
@@ -147,7 +148,12 @@ def test_queue_puts_disagreement_and_uncertainty_first(client: TestClient, sessi
     scores = [row["score"] for row in items]
     assert scores == sorted(scores, reverse=True)
     seg = session.run.segments
-    disagree = int((seg["raw_label"] != seg["label"]).sum())
+    big = seg["n_points"] >= MIN_QUEUE_POINTS
+    assert all(row["n_points"] >= MIN_QUEUE_POINTS for row in items)  # too small to judge
+    assert (~big).any(), "the test street has tiny segments to leave out"
+    expected = segment_queue_scores(seg)
+    assert scores == [round(float(expected[row["id"]]), 4) for row in items]
+    disagree = int(((seg["raw_label"] != seg["label"]) & big).sum())
     assert [row["reason"] for row in items[: min(disagree, 50)]] == ["disagrees"] * min(
         disagree, 50
     )

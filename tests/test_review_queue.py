@@ -1,11 +1,19 @@
-"""The review queue's order: corrected-away predictions first, then the most uncertain, reviewed
-segments never; ties in drive order."""
+"""The review queue's order: corrected-away predictions first, then the change a decision is
+expected to make (uncertainty, points moved, a run joined or split), reviewed and tiny segments
+never; ties in drive order."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from guardrail_core.review.queue import queue_order, queue_scores, uncertainty
+from guardrail_core.review.queue import (
+    odd_one_out,
+    points_weight,
+    queue_order,
+    queue_scores,
+    segment_queue_scores,
+    uncertainty,
+)
 
 
 def test_uncertainty_peaks_at_a_half_and_counts_no_probability_as_unsure() -> None:
@@ -26,3 +34,37 @@ def test_the_queue_ranks_disagreement_then_uncertainty_and_skips_reviewed() -> N
     np.testing.assert_allclose(score, [0.2, 1, 1.2, 0.8, 0.9, 1, 0.04])
     assert queue_order(score, reviewed).tolist() == [2, 1, 4, 3, 0, 6]
     assert queue_order(score, np.ones(7, bool)).tolist() == []
+
+
+def test_a_decision_counts_by_the_points_it_moves_and_the_run_it_changes() -> None:
+    """Expected change: uncertainty weighted by log points (full at 200) and by 1.5 where the
+    segment's label differs from both neighbours along its component; tiny segments skipped."""
+    np.testing.assert_allclose(
+        points_weight(np.array([0, 1, 10, 200, 5000])),
+        [0, np.log(2) / np.log(201), np.log(11) / np.log(201), 1, 1],
+    )
+    #              component 0: G G O G | component 1: O G O, then a lone slice 9 of component 1
+    component = np.array([0, 0, 0, 0, 1, 1, 1, 1])
+    slice_index = np.array([0, 1, 2, 3, 5, 6, 7, 9])
+    label = np.array([1, 1, 0, 1, 0, 1, 0, 1], bool)
+    odd = odd_one_out(component, slice_index, label)
+    # Segment 2 (other between guardrails) joins; 5 (lone guardrail) splits; the run ends and
+    # segment 7 (slice 9: no neighbour at slice 8) are not between two others.
+    assert odd.tolist() == [False, False, True, False, False, True, False, False]
+    probability = np.full(8, 0.5)
+    n_points = np.array([200, 200, 200, 200, 200, 200, 5, 200])
+    score = queue_scores(probability, label, label, n_points=n_points, run_change=odd)
+    np.testing.assert_allclose(score[[0, 2, 5]], [1.0, 1.5, 1.5])
+    np.testing.assert_allclose(score[6], points_weight(np.array([5]))[0])
+    order = queue_order(score, np.zeros(8, bool), n_points=n_points)
+    assert order.tolist() == [2, 5, 0, 1, 3, 4, 7]  # 6 (5 points) left out; ties in drive order
+    assert 6 in queue_order(score, np.zeros(8, bool), n_points=n_points, min_points=5).tolist()
+    table = {
+        "probability": probability,
+        "raw_label": label,
+        "label": label,
+        "n_points": n_points,
+        "component": component,
+        "slice_index": slice_index,
+    }
+    np.testing.assert_allclose(segment_queue_scores(table), score)

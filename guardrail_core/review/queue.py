@@ -7,6 +7,8 @@ queue operators get.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 
 
@@ -16,15 +18,90 @@ def uncertainty(probability: np.ndarray) -> np.ndarray:
     return np.where(np.isnan(p), 1.0, 1.0 - np.abs(2.0 * p - 1.0))
 
 
-def queue_scores(probability: np.ndarray, raw_label: np.ndarray, label: np.ndarray) -> np.ndarray:
-    """(S,) float64: the model's uncertainty, plus 1 where the raw prediction and the corrected
-    label disagree (§3.3's correction changed it: such a segment comes first)."""
+#: Segments of fewer points are left out of the queue: a few points say too little to judge
+#: (most have no crop), and a decision on them moves almost nothing.
+MIN_QUEUE_POINTS = 10
+#: Points at which a decision's weight stops growing (it grows with their logarithm).
+FULL_WEIGHT_POINTS = 200
+#: How much more a decision counts when it joins two guardrail stretches or removes a lone one.
+RUN_CHANGE_WEIGHT = 0.5
+
+
+def points_weight(n_points: np.ndarray) -> np.ndarray:
+    """(S,) 0..1: how much of a run a decision on each segment moves, log1p(n) / log1p(200)
+    capped at 1 (a 1-point segment 0.13, 10 points 0.45, 200 points and more 1)."""
+    n = np.asarray(n_points, np.float64)
+    return np.minimum(1.0, np.log1p(n) / np.log1p(FULL_WEIGHT_POINTS))
+
+
+def odd_one_out(component: np.ndarray, slice_index: np.ndarray, label: np.ndarray) -> np.ndarray:
+    """(S,) bool: segments whose label differs from both neighbours' along their connected run
+    (the previous and the next slice of the same wireframe component, §3.1): flipping such a
+    segment joins two guardrail stretches into one, or removes a lone guardrail piece."""
+    component = np.asarray(component, np.int64)
+    slice_index = np.asarray(slice_index, np.int64)
+    label = np.asarray(label, bool)
+    key = component * (1 << 32) + (slice_index - slice_index.min() if len(slice_index) else 0)
+    order = np.argsort(key, kind="stable")
+    k, lab = key[order], label[order]
+    before = np.zeros(len(k), bool)
+    after = np.zeros(len(k), bool)
+    before[1:] = (k[1:] - k[:-1] == 1) & (lab[:-1] != lab[1:])
+    after[:-1] = (k[1:] - k[:-1] == 1) & (lab[1:] != lab[:-1])
+    out = np.zeros(len(k), bool)
+    out[order] = before & after
+    return out
+
+
+def queue_scores(
+    probability: np.ndarray,
+    raw_label: np.ndarray,
+    label: np.ndarray,
+    *,
+    n_points: np.ndarray | None = None,
+    run_change: np.ndarray | None = None,
+) -> np.ndarray:
+    """(S,) float64: the change a decision is expected to make.
+
+    The model's uncertainty (how likely the operator's label differs from its own), weighted
+    by the points the decision moves (:func:`points_weight`, when ``n_points`` is given) and
+    by half again where it would join or split a guardrail run (``run_change``,
+    :func:`odd_one_out`); plus 1 where the raw prediction and the corrected label disagree
+    (§3.3's correction changed it: such a segment comes first).
+    """
     disagrees = np.asarray(raw_label, bool) != np.asarray(label, bool)
-    return uncertainty(probability) + disagrees.astype(np.float64)
+    expected = uncertainty(probability)
+    if n_points is not None:
+        expected = expected * points_weight(n_points)
+    if run_change is not None:
+        expected = expected * (1.0 + RUN_CHANGE_WEIGHT * np.asarray(run_change, bool))
+    return expected + disagrees.astype(np.float64)
 
 
-def queue_order(score: np.ndarray, reviewed: np.ndarray) -> np.ndarray:
+def segment_queue_scores(segments: Mapping[str, np.ndarray]) -> np.ndarray:
+    """(S,) :func:`queue_scores` of a run's segments table (``segments.npz``), every term used:
+    what the review app's queue and the review-loop benchmark rank by."""
+    return queue_scores(
+        segments["probability"],
+        segments["raw_label"],
+        segments["label"],
+        n_points=segments["n_points"],
+        run_change=odd_one_out(segments["component"], segments["slice_index"], segments["label"]),
+    )
+
+
+def queue_order(
+    score: np.ndarray,
+    reviewed: np.ndarray,
+    *,
+    n_points: np.ndarray | None = None,
+    min_points: int = MIN_QUEUE_POINTS,
+) -> np.ndarray:
     """(K,) int64 ids of the unreviewed segments (``reviewed`` (S,) bool False), highest
-    :func:`queue_scores` ``score`` (S,) first; ties keep the segments' order along the drive."""
-    candidates = np.flatnonzero(~np.asarray(reviewed, bool))
+    :func:`queue_scores` ``score`` (S,) first; ties keep the segments' order along the drive.
+    With ``n_points``, segments of fewer than ``min_points`` points are left out."""
+    keep = ~np.asarray(reviewed, bool)
+    if n_points is not None:
+        keep &= np.asarray(n_points) >= min_points
+    candidates = np.flatnonzero(keep)
     return candidates[np.argsort(-np.asarray(score)[candidates], kind="stable")].astype(np.int64)
