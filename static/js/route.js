@@ -2,7 +2,8 @@
 // every reconstructed guardrail run, coloured by the operators' progress on it)
 // and the inventory table beside it. A click on a run, on the map or in the
 // table, selects the run's most doubtful unreviewed segment: the 3D scene flies
-// there. `[` and `]` go to the previous and the next run along the drive.
+// there, and the review queue becomes that run's doubtful segments along the road.
+// `[` and `]` go to the previous and the next run along the drive.
 
 import * as api from "./api.js";
 import { int, plural, toast } from "./api.js";
