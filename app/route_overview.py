@@ -10,6 +10,7 @@ are those the model or an operator calls guardrail, and every reviewed one.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -19,8 +20,10 @@ from app.session import ReviewSession
 from guardrail_core.errors import GuardrailError
 from guardrail_core.formats.drive_tiles import vehicle_station
 from guardrail_core.reconstruct.inventory import inventory_rows
+from guardrail_core.reconstruct.model import RunModel
 from guardrail_core.reconstruct.model_json import run_model_from_json
 from guardrail_core.review.queue import segment_queue_scores
+from guardrail_core.sensors.trajectory import Trajectory
 
 #: Metres (horizontal): how far from its run's pole line a segment's centroid may lie.
 RUN_REACH_M = 1.5
@@ -38,7 +41,8 @@ class RunPlace:
 
     row: dict  # its inventory row (:func:`guardrail_core.reconstruct.inventory.inventory_rows`)
     path: np.ndarray  # (P, 2) float64, its poles in order, local metres
-    station_m: float  # the vehicle's station nearest its first pole
+    station_m: float  # metres along the drive where it starts: the nearest of its poles
+    station_end_m: float  # ... and where it ends
 
 
 def run_places(session: ReviewSession) -> list[RunPlace]:
@@ -50,17 +54,28 @@ def run_places(session: ReviewSession) -> list[RunPlace]:
         return []
     models = [run_model_from_json(run) for run in document.runs]
     rows = inventory_rows(models, session.drive.origin)
-    trajectory = session.drive.trajectory
+    stations = run_stations(models, session.drive.trajectory)
+    places = [
+        RunPlace(row, np.array([p.position[:2] for p in model.poles], np.float64), *stations[k])
+        for k, (model, row) in enumerate(zip(models, rows, strict=True))
+        if model.poles
+    ]
+    return sorted(places, key=lambda p: (p.station_m, p.row["run_id"]))
+
+
+def run_stations(runs: Sequence[RunModel], trajectory: Trajectory) -> list[tuple[float, float]]:
+    """(first, last) metres along the drive of each run's poles: the vehicle's station at the
+    trajectory sample nearest each pole; (-inf, inf) for a run without poles."""
     station = vehicle_station(trajectory, trajectory.time)
     tree = cKDTree(trajectory.position[:, :2])
-    places = []
-    for model, row in zip(models, rows, strict=True):
-        if not model.poles:
+    out = []
+    for run in runs:
+        if not run.poles:
+            out.append((-np.inf, np.inf))
             continue
-        path = np.array([p.position[:2] for p in model.poles], np.float64)
-        nearest = int(tree.query(path[0])[1])
-        places.append(RunPlace(row, path, float(station[nearest])))
-    return sorted(places, key=lambda p: (p.station_m, p.row["run_id"]))
+        along = station[tree.query([p.position[:2] for p in run.poles])[1]]
+        out.append((float(along.min()), float(along.max())))
+    return out
 
 
 def segment_runs(session: ReviewSession, places: list[RunPlace]) -> np.ndarray:

@@ -10,6 +10,7 @@ import pytest
 import viser
 import viser.transforms as vtf
 
+from app.route_overview import run_places
 from app.scene.colours import GUARDRAIL, OTHER, SELECTED, point_colours, probability_colours
 from app.scene.picking import in_polygon, in_rectangle, pick_along_ray, project_to_screen
 from app.scene.tuning import RunTuner, unit_numbers, with_value
@@ -303,3 +304,36 @@ def test_a_lasso_selects_the_points_inside_it_and_the_page_labels_only_those(
     assert len(session.lasso) == 0
     with pytest.raises(InvalidOptionError, match="no lasso"):
         session.relabel_lasso("other")
+
+
+def test_only_the_meshes_of_runs_near_the_window_are_sent(session: ReviewSession) -> None:
+    """A survey has thousands of runs: the scene sends the meshes of those within half a window
+    of it, and swaps them as the window moves."""
+    server = viser.ViserServer(host="127.0.0.1", port=18_481, verbose=False)
+    try:
+        scene = ReviewScene(session, server, window_m=6.0, point_budget=20_000)
+        places = {p.row["run_id"]: (p.station_m, p.station_end_m) for p in run_places(session)}
+        with_mesh = set(session.folder.reconstruction.mesh_files("glb"))
+        assert len(with_mesh) >= 2
+
+        def near(start: float) -> set[int]:
+            lo, hi = start - 3.0, start + 6.0 + 3.0
+            return {r for r in with_mesh if places[r][0] <= hi and places[r][1] >= lo}
+
+        seen, fewer = set(), False  # runs seen, and a window without them all
+        for start in np.arange(scene.station_range[0], scene.station_range[1], 3.0):
+            scene.show_window(float(start))
+            assert set(scene._meshes) == near(scene.start_m)
+            seen |= set(scene._meshes)
+            fewer |= set(scene._meshes) != with_mesh
+        assert seen == with_mesh, places  # every run's mesh was shown along the way
+        if not fewer:  # the test street's runs span it all: place them apart to see the swap
+            first, second = sorted(with_mesh)[:2]
+            scene._mesh_stations = {first: (0.0, 5.0), second: (25.0, 30.0)}
+            scene.show_window(0.0)
+            assert set(scene._meshes) == {first} | (with_mesh - {first, second})
+            scene.show_window(22.0)
+            assert set(scene._meshes) == {second} | (with_mesh - {first, second})
+        scene.close()
+    finally:
+        server.stop()

@@ -110,6 +110,23 @@ def test_wrong_trajectory_columns(copy: Path) -> None:
         load_drive(copy)
 
 
+@pytest.mark.parametrize(
+    "rows, error, match",
+    [
+        ([], DriveDimensionError, "at least 2 rows"),  # the header alone
+        (["1,2,3,4,5,6,7", "2,3,4,5,6,7"], DriveFormatError, "malformed"),  # a short row
+        (["1,2,3,4,5,6,7", "2,x,4,5,6,7,8"], DriveFormatError, "not a number"),
+        (["1,2,3,4,5,6,7", "# 2,3,4,5,6,7,8"], DriveFormatError, "not a number"),  # no comments
+    ],
+)
+def test_malformed_trajectory_rows_are_refused_by_name(
+    copy: Path, rows: list[str], error: type[Exception], match: str
+) -> None:
+    (copy / "trajectory.csv").write_text("\n".join(["time,x,y,z,roll,pitch,yaw", *rows]) + "\n")
+    with pytest.raises(error, match=match):
+        load_drive(copy)
+
+
 def test_non_finite_trajectory(copy: Path) -> None:
     path = copy / "trajectory.csv"
     lines = path.read_text().splitlines()

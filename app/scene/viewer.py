@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import threading
 import time
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -22,6 +23,7 @@ import viser.transforms as vtf
 
 from app import review_jobs
 from app.jobs import JobBusyError, JobRunner
+from app.route_overview import run_stations
 from app.run_tiles import TilePoints
 from app.scene.colours import COLOUR_MODES, SELECTED, point_colours
 from app.scene.picking import in_polygon, in_rectangle, pick_along_ray, project_to_screen
@@ -92,6 +94,8 @@ class ReviewScene:
         self._cloud: viser.PointCloudHandle | None = None
         self._frusta: list[viser.CameraFrustumHandle] = []
         self._meshes: dict[int, viser.GlbHandle | viser.MeshHandle] = {}
+        self._mesh_files: dict[int, Path] = {}  # run id -> its GLB, read when near the window
+        self._mesh_stations: dict[int, tuple[float, float]] = {}  # metres along the drive
         self._shown_mesh: dict[int, trimesh.Trimesh] = {}  # per run: the mesh now shown
         self._ghosts: dict[int, viser.MeshHandle] = {}
         self._fly_on_select = True
@@ -138,6 +142,7 @@ class ReviewScene:
                 precision="float32",
             )
         self._add_cameras()
+        self.show_meshes_near()
         self._window_text.content = (
             f"{start_m:.0f}-{start_m + self.window_m:.0f} m of "
             f"{hi - lo:.0f} m · {len(self.shown):,} points"
@@ -219,7 +224,8 @@ class ReviewScene:
     # -- meshes -----------------------------------------------------------------------------
 
     def load_meshes(self) -> None:
-        """Show every reconstructed run's mesh (from ``reconstruction/meshes``)."""
+        """Read which runs have a reconstructed mesh (``reconstruction/meshes``) and where they
+        lie along the drive, and show those near the window (:meth:`show_meshes_near`)."""
         self._shown_mesh = {}
         for name in list(self._ghosts):
             self._ghosts.pop(name).remove()
@@ -230,11 +236,27 @@ class ReviewScene:
             self._tuner = RunTuner(self.session.folder)
         except (RunFolderError, OSError, KeyError):
             self._tuner = None
-        for run_id, path in self.session.folder.reconstruction.mesh_files("glb").items():
-            self._meshes[run_id] = self.server.scene.add_glb(
-                _mesh_node(run_id), glb_data=path.read_bytes()
-            )
+        self._mesh_files = self.session.folder.reconstruction.mesh_files("glb")
+        runs = self._tuner.runs if self._tuner is not None else []
+        stations = run_stations(runs, self.session.drive.trajectory)
+        self._mesh_stations = {run.run_id: at for run, at in zip(runs, stations, strict=True)}
+        self.show_meshes_near()
         self._update_tuning_runs()
+
+    def show_meshes_near(self) -> None:
+        """Show the meshes of the runs within half a window of the window (a survey has
+        thousands), and take away the others but those being tuned."""
+        margin = 0.5 * self.window_m
+        lo, hi = self.start_m - margin, self.start_m + self.window_m + margin
+        for run_id, path in self._mesh_files.items():
+            first, last = self._mesh_stations.get(run_id, (-np.inf, np.inf))  # no poles: always
+            near = first <= hi and last >= lo
+            if near and run_id not in self._meshes:
+                self._meshes[run_id] = self.server.scene.add_glb(
+                    _mesh_node(run_id), glb_data=path.read_bytes()
+                )
+            elif not near and run_id in self._meshes and run_id not in self._shown_mesh:
+                self._meshes.pop(run_id).remove()
 
     # -- picking ----------------------------------------------------------------------------
 

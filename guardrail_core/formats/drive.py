@@ -26,6 +26,7 @@ import dataclasses
 import json
 import math
 import os
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -202,21 +203,19 @@ def read_trajectory_csv(path: Path, origin: np.ndarray, reference_height_m: floa
     """Read ``trajectory.csv`` (columns ``TRAJECTORY_COLUMNS``; map coordinates) to a local Trajectory."""
     _require(path, "trajectory")
     with path.open(newline="") as handle:
-        reader = csv.reader(handle)
-        header = next(reader, None)
+        header = next(csv.reader([handle.readline()]), None)
         if header is None or tuple(h.strip() for h in header) != TRAJECTORY_COLUMNS:
             raise DriveDimensionError(
                 f"{path}: expected the header {','.join(TRAJECTORY_COLUMNS)}, got {header}"
             )
-        rows = list(reader)
-    try:
-        data = np.array([[float(v) for v in row] for row in rows], np.float64).reshape(
-            -1, len(rows[0]) if rows else 7
-        )
-    except ValueError as exc:
-        raise DriveFormatError(
-            f"{path}: a row is malformed or a value is not a number ({exc})"
-        ) from exc
+        try:  # NumPy's C reader: a survey's trajectory has millions of rows
+            with warnings.catch_warnings():  # no rows: refused below, by name
+                warnings.simplefilter("ignore", UserWarning)
+                data = np.loadtxt(handle, delimiter=",", dtype=np.float64, comments=None, ndmin=2)
+        except ValueError as exc:
+            raise DriveFormatError(
+                f"{path}: a row is malformed or a value is not a number ({exc})"
+            ) from exc
     if data.ndim != 2 or data.shape[1] != 7 or data.shape[0] < 2:
         raise DriveDimensionError(
             f"{path}: expected at least 2 rows of 7 columns, got shape {data.shape}"
