@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from weakref import WeakKeyDictionary
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -45,9 +46,31 @@ class RunPlace:
     station_end_m: float  # ... and where it ends
 
 
+#: Per session: the run places and the ``models.json`` they were read from (its stat), so
+#: they are read again only when the reconstruction is redone (the page asks after every label).
+_PLACES: WeakKeyDictionary[ReviewSession, tuple[tuple[int, int] | None, list[RunPlace]]] = (
+    WeakKeyDictionary()
+)
+
+
 def run_places(session: ReviewSession) -> list[RunPlace]:
     """Every reconstructed run with at least one pole, in order along the drive; empty for a
     run folder without a reconstruction."""
+    models_file = session.folder.reconstruction.models_file
+    try:
+        stat = models_file.stat()
+        key: tuple[int, int] | None = (stat.st_mtime_ns, stat.st_size)
+    except OSError:
+        key = None
+    cached = _PLACES.get(session)
+    if cached is not None and cached[0] == key:
+        return cached[1]
+    places = _read_run_places(session)
+    _PLACES[session] = (key, places)
+    return places
+
+
+def _read_run_places(session: ReviewSession) -> list[RunPlace]:
     try:
         document = session.folder.reconstruction.read_models()
     except GuardrailError:
@@ -84,9 +107,7 @@ def segment_runs(session: ReviewSession, places: list[RunPlace]) -> np.ndarray:
     if not places:
         return out
     seg = session.run.segments
-    counted = np.flatnonzero(
-        seg["label"] | session.effective_label() | (session.operator_label >= 0)
-    )
+    counted = np.flatnonzero(counted_segments(session))
     samples, owner = [], []
     for k, place in enumerate(places):
         line = _sampled(place.path)
@@ -97,6 +118,13 @@ def segment_runs(session: ReviewSession, places: list[RunPlace]) -> np.ndarray:
     found = np.isfinite(distance)
     out[counted[found]] = np.concatenate(owner)[nearest[found]]
     return out
+
+
+def counted_segments(session: ReviewSession) -> np.ndarray:
+    """(S,) bool: the segments that count for a run: those the model or an operator calls
+    guardrail, and every reviewed one."""
+    labels = session.run.segments["label"]
+    return labels | session.effective_label() | (session.operator_label >= 0)
 
 
 def _sampled(path: np.ndarray) -> np.ndarray:
@@ -148,7 +176,7 @@ def route_overview(session: ReviewSession) -> dict:
     step = max(1, int(np.ceil(len(position) / TRAJECTORY_VERTICES)))
     path = np.concatenate([position[::step, :2], position[-1:, :2]])
     length = vehicle_station(session.drive.trajectory, session.drive.trajectory.time[-1:])
-    counted = seg["label"] | session.effective_label() | reviewed
+    counted = counted_segments(session)
     return {
         "trajectory": np.round(path, 2).tolist(),
         "length_m": round(float(length[0]), 1),

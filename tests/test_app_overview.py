@@ -153,3 +153,16 @@ def test_review_this_run_steps_through_its_doubtful_segments_along_the_road(
     unknown = max(place.row["run_id"] for place in places) + 1
     assert client.get(f"/api/queue?run={unknown}").status_code == 404
     assert client.get("/api/queue?run=-1").status_code == 422
+
+
+def test_a_redone_reconstruction_is_read_again(client: TestClient, session: ReviewSession) -> None:
+    """The runs are kept between requests, and read again once models.json changes (as
+    "Apply to the whole drive" rewrites it)."""
+    before = client.get("/api/overview").json()["runs"]
+    models = session.run.root / "reconstruction" / "models.json"
+    document = json.loads(models.read_text())
+    dropped = before[0]["run_id"]
+    document["runs"] = [run for run in document["runs"] if run["run_id"] != dropped]
+    models.write_text(json.dumps(document, indent=2))
+    after = client.get("/api/overview").json()["runs"]
+    assert [r["run_id"] for r in after] == [r["run_id"] for r in before[1:]]
