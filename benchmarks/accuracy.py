@@ -3,7 +3,7 @@
 Usage::
 
     .venv/bin/python benchmarks/accuracy.py [--streets 10] [--workers 2]
-        [--data benchmarks/data/accuracy] [--set STAGE.NAME=VALUE ...] [--json]
+        [--data benchmarks/data/accuracy] [--set STAGE.NAME=VALUE ...] [--model DIR] [--json]
 
 **The rule.** Seeds 10001-19999 belong to this benchmark alone: no training drive, test, example,
 figure or tuning uses them (``tests/test_accuracy_seeds.py`` fails if another file of the
@@ -46,11 +46,12 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from guardrail_core.classes import GUARDRAIL_CLASSES  # noqa: E402
+from guardrail_core.classes import GUARDRAIL_CLASSES, TruthClass  # noqa: E402
 from guardrail_core.cli.common import process_params  # noqa: E402
 from guardrail_core.distributed import ClusterSpec  # noqa: E402
 from guardrail_core.evaluate.misses import (  # noqa: E402
@@ -92,19 +93,29 @@ def street_seeds(count: int) -> list[int]:
 
 
 def ensure_street(data: Path, seed: int) -> Path:
-    """The street of ``seed`` under ``data`` (simulated the first time)."""
+    """The street of ``seed`` under ``data``: simulated the first time, and again when the
+    simulator's street for that seed has changed since (its ``truth/scene.yaml`` differs)."""
     out = data / f"street_{seed}"
-    if not (out / "drive.json").is_file():
-        print(f"simulating {out.name} ({LENGTH_M:g} m) ...", file=sys.stderr, flush=True)
-        simulate_drive(random_scene_spec(seed, LENGTH_M), out, seed=seed, progress=False)
+    spec = random_scene_spec(seed, LENGTH_M)
+    scene = out / "truth" / "scene.yaml"
+    stale = scene.is_file() and yaml.safe_load(scene.read_text()) != spec
+    if stale or not (out / "drive.json").is_file():
+        why = "again: the simulator's street changed" if stale else f"({LENGTH_M:g} m)"
+        print(f"simulating {out.name} {why} ...", file=sys.stderr, flush=True)
+        simulate_drive(spec, out, seed=seed, progress=False, overwrite=True)
     return out
 
 
 def measure_street(
-    drive: Path, run: Path, workers: int, reuse: bool = False, settings: Sequence[str] = ()
+    drive: Path,
+    run: Path,
+    workers: int,
+    reuse: bool = False,
+    settings: Sequence[str] = (),
+    model: Path = DEFAULT_MODEL_DIR,
 ) -> dict:
-    """Process one street with the default model (``reuse``: keep a run already there;
-    ``settings``: ``guardrail process --set`` values) and compare the run with its truth."""
+    """Process one street with ``model`` (``reuse``: keep a run already there; ``settings``:
+    ``guardrail process --set`` values) and compare the run with its truth."""
     seconds = None  # a run reused
     if not (reuse and (run / "run.json").is_file()):
         if run.exists():
@@ -113,7 +124,7 @@ def measure_street(
         extraction, reconstruction = process_params(list(settings))
         process_drive_folder(
             drive,
-            DEFAULT_MODEL_DIR,
+            model,
             run,
             params=extraction,
             reconstruction=reconstruction,
@@ -127,6 +138,9 @@ def measure_street(
     segments = folder.segments()
     pole_points = PolePointCounter(source.objects)
     guardrail_points = np.zeros(len(segments["n_points"]))
+    label = np.asarray(segments["label"], bool)
+    # Points of vegetation (hedges, shrubs, tall grass) and how many end up labelled guardrail.
+    vegetation = {"points": 0, "labelled_guardrail": 0, "guardrail_labelled_points": 0}
     for t in range(len(source.tiles)):
         points, truth = source.read_tiles([t])
         assert truth is not None  # simulated
@@ -137,8 +151,13 @@ def measure_street(
         guardrail_points += np.bincount(
             segment[inside], weights=guardrail, minlength=len(guardrail_points)
         )
+        green = truth.point_class == TruthClass.VEGETATION
+        labelled = np.zeros(len(segment), bool)
+        labelled[inside] = label[segment[inside]]
+        vegetation["points"] += int(green.sum())
+        vegetation["labelled_guardrail"] += int((green & labelled).sum())
+        vegetation["guardrail_labelled_points"] += int(labelled.sum())
     segment_truth = 2 * guardrail_points > segments["n_points"]
-    label = np.asarray(segments["label"], bool)
     counts = {
         name: {
             "tp": int((truth_class & predicted).sum()),
@@ -159,6 +178,7 @@ def measure_street(
         "detection": counts,
         "detection_misses": explain_detection_misses(segment_truth, label, segments),
         "misses": misses,
+        "vegetation": vegetation,
     }
 
 
@@ -220,9 +240,13 @@ def summarise(streets: list[dict]) -> dict:
             for cause, n in counts.items():
                 wrong.setdefault(kind, {}).setdefault(cause, 0)
                 wrong[kind][cause] += n
+    vegetation = {
+        key: sum(s["vegetation"][key] for s in streets) for key in streets[0]["vegetation"]
+    }
     return {
         "detection": detection,
         "detection_misses": wrong,
+        "vegetation": vegetation,
         "figures": figures,
         "met": met,
         "misses": misses,
@@ -234,7 +258,7 @@ def report(summary: dict, streets: list[dict]) -> str:
     ok = {True: "met", False: "MISSED"}
     lines = [
         f"{len(streets)} streets of {LENGTH_M:g} m (seeds {streets[0]['seed']}-"
-        f"{streets[-1]['seed']}), the default model, 100 m tiles",
+        f"{streets[-1]['seed']}), the model {summary['model']}, 100 m tiles",
         "",
         f"{'detection (segments)':24s}{'n_true':>8s}{'recall':>9s}{'precision':>11s}"
         f"{'F':>8s}{'F 95 % interval':>18s}",
@@ -254,6 +278,13 @@ def report(summary: dict, streets: list[dict]) -> str:
     lines.append(
         "  false alarms by cause: "
         + ", ".join(f"{c} {n}" for c, n in wrong["false alarms"].items())
+    )
+    v = summary["vegetation"]
+    lines.append(
+        f"  vegetation points labelled guardrail: {v['labelled_guardrail']:,} of "
+        f"{v['points']:,} ({100 * v['labelled_guardrail'] / max(v['points'], 1):.1f} %; "
+        f"{100 * v['labelled_guardrail'] / max(v['guardrail_labelled_points'], 1):.1f} % of "
+        "the points labelled guardrail)"
     )
     lines += [
         "",
@@ -320,6 +351,11 @@ def main() -> int:
         help="a parameter as `guardrail process --set` takes it (repeatable), to measure a "
         "change against the defaults on the same streets (its runs go to DATA/runs_set)",
     )
+    parser.add_argument(
+        "--model",
+        type=Path,
+        help="another model folder to measure on the same streets (its runs go to DATA/runs_set)",
+    )
     args = parser.parse_args()
     args.data.mkdir(parents=True, exist_ok=True)
     streets = []
@@ -328,13 +364,14 @@ def main() -> int:
         print(f"processing {drive.name} ...", file=sys.stderr, flush=True)
         result = measure_street(
             drive,
-            args.data / ("runs" if not args.set else "runs_set") / drive.name,
+            args.data / ("runs_set" if args.set or args.model else "runs") / drive.name,
             args.workers,
             reuse=args.reuse_runs,
             settings=args.set,
+            model=args.model or DEFAULT_MODEL_DIR,
         )
         streets.append({"seed": seed, **result})
-    summary = summarise(streets)
+    summary = {**summarise(streets), "model": str(args.model or "default")}
     document = {
         **{k: v for k, v in summary.items() if k != "misses"},
         "misses": summary["misses"].to_json(),

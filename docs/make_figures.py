@@ -57,6 +57,7 @@ PALETTE: dict[int, tuple[int, int, int]] = {
     TruthClass.CAR: (120, 200, 250),
     TruthClass.BUILDING: (130, 140, 170),
     TruthClass.PEDESTRIAN: (250, 120, 180),
+    TruthClass.VEGETATION: (150, 230, 60),
 }
 
 

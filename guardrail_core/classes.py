@@ -30,6 +30,7 @@ class TruthClass(IntEnum):
     CAR = 15
     BUILDING = 16
     PEDESTRIAN = 17
+    VEGETATION = 18  # hedges, shrubs and grass taller than a mown verge (trees are TREE)
 
 
 #: Classes that together make a guardrail: the detection target of §3.

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+import yaml
 
 from guardrail_core.cli import main
 
@@ -52,6 +54,21 @@ def test_simulate_a_random_drive_and_describe_it(
     assert "points" in text and "guardrail runs" in text and str(out.resolve()) in text
     assert (out / "drive.json").is_file() and (out / "truth" / "objects.json").is_file()
     assert main(["info", str(out)]) == 0
+
+
+def test_simulate_takes_the_scanner_s_conditions_and_a_bare_roadside(tmp_path: Path) -> None:
+    out = tmp_path / "drive"
+    options = ["--range-noise", "0.02", "--dropout", "0.1", "--intensity-gain", "0.5"]
+    args = ["simulate", str(out), "--seed", "4", "--length", "25", "--image-every", "1000"]
+    assert main([*args, *options, "--no-roadside", "--quiet"]) == 0
+    spec = yaml.safe_load((out / "truth" / "scene.yaml").read_text())
+    assert spec["scanner"] == {"range_noise_m": 0.02, "dropout": 0.1, "intensity_gain": 0.5}
+    assert "roadside" not in spec["road"]
+    kinds = {o["kind"] for o in json.loads((out / "truth" / "objects.json").read_text())}
+    assert not kinds & {"hedge", "shrub", "tall_grass"}
+    # A dropout out of range is named with its key, and nothing is written.
+    assert main([*args[:1], str(tmp_path / "y"), "--dropout", "2", "--quiet"]) == 2
+    assert not (tmp_path / "y").exists()
 
 
 def test_errors_are_reported_without_a_traceback(

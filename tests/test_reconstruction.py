@@ -266,6 +266,17 @@ def test_rails_without_poles_are_not_reconstructed_and_the_inventory_says_why() 
     assert "pole" in row["notes"]
 
 
+def test_two_poles_with_no_room_between_them_give_poles_only() -> None:
+    """Two thick stems 0.18 m apart (a bush beside a rail) detected as poles: no unit to model, and
+    no error that would stop the drive's other runs."""
+    synth = make_run(n_units=1, spacing=0.18, pole_radius=0.085, seed=8, rail_points_per_m=400)
+    run, superimposed = _reconstruct(synth)
+    assert len(run.poles) == 2 and run.model is None and superimposed is None
+    assert any("no room for a unit" in note for note in run.notes)
+    [row] = inventory_rows([run], np.zeros(3))
+    assert row["status"] == "poles only"
+
+
 def test_a_unit_without_points_between_its_poles_gives_poles_only() -> None:
     synth = make_run(n_units=2, seed=6, rail_points_per_m=0)
     run, _ = _reconstruct(synth)

@@ -12,7 +12,7 @@ from guardrail_core.sensors.scanner import ScannerParams, scanner_mounting
 from guardrail_core.sensors.trajectory import Trajectory
 from guardrail_core.synth.mesh import MeshBuilder
 from guardrail_core.synth.raycast import SceneRaycaster
-from guardrail_core.synth.scanner import scan
+from guardrail_core.synth.scanner import ReturnModel, scan
 
 WALL_Y = 4.0  # a wall 4 m to the vehicle's left, along its path
 
@@ -121,3 +121,24 @@ def test_intensity_follows_reflectivity() -> None:
     dark = scan(_wall_scene("rubber"), _straight_drive(), scanner, np.random.default_rng(2))
     assert np.median(bright.intensity) > 2 * np.median(dark.intensity)
     assert len(dark.xyz) < len(bright.xyz)  # weak returns drop out
+
+
+def test_intensity_gain_scales_every_intensity_and_dropout_thins_the_returns() -> None:
+    scanner = ScannerParams(t0_s=1000.0)
+    wall, drive = _wall_scene("concrete"), _straight_drive()
+    calibrated = scan(wall, drive, scanner, np.random.default_rng(3))
+    # The same seed draws the same dropouts and noise: only the intensities change.
+    dim = scan(
+        wall, drive, scanner, np.random.default_rng(3), returns=ReturnModel(intensity_gain=0.5)
+    )
+    np.testing.assert_array_equal(dim.xyz, calibrated.xyz)
+    strong = calibrated.intensity > 2000
+    assert strong.mean() > 0.9
+    ratio = dim.intensity[strong] / calibrated.intensity[strong].astype(float)
+    np.testing.assert_allclose(ratio, 0.5, atol=1e-3)
+
+    sparse = scan(
+        wall, drive, scanner, np.random.default_rng(3), returns=ReturnModel(base_dropout=0.3)
+    )
+    # A wall at 4 m loses almost nothing to a weak signal: the extra 29 % goes.
+    assert len(sparse) / len(calibrated) == pytest.approx(0.71 / 0.99, abs=0.02)

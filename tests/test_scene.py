@@ -13,6 +13,7 @@ from guardrail_core.errors import SceneSpecError
 from guardrail_core.synth.confounders import CONFOUNDER_KINDS
 from guardrail_core.synth.designs import list_designs, load_design
 from guardrail_core.synth.scene import build_scene, list_scenes, load_scene_spec, random_scene_spec
+from guardrail_core.synth.vegetation import VEGETATION_KINDS
 
 
 @pytest.mark.parametrize("name", list_scenes())
@@ -30,7 +31,7 @@ def test_random_scene_mixes_every_design_and_every_kind() -> None:
     designs = {o["design"] for o in scene.objects if o["kind"] == "guardrail"}
     kinds = {o["kind"] for o in scene.objects} - {"guardrail"}
     assert designs == set(list_designs())
-    assert kinds == set(CONFOUNDER_KINDS) - (
+    assert kinds == (set(CONFOUNDER_KINDS) | set(VEGETATION_KINDS)) - (
         {"parked_car"} if spec["road"]["lanes"] == 1 else set()
     )
     assert {load_design(d).type for d in designs} == {"pipe", "beam"}

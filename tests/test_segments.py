@@ -281,8 +281,43 @@ def test_a_wide_slice_is_cut_where_its_points_thin_out_across() -> None:
     np.testing.assert_array_equal(segments.slice_index, 0)
     # Without lateral offsets, or with the cut turned off, the slice stays whole.
     assert len(slice_components(component, station, PARAMS)) == 1
-    whole = SegmentParams(max_width_m=0.0)
+    whole = SegmentParams(max_width_m=0.0, gap_width_m=0.0)
     assert len(slice_components(component, station, whole, lateral)) == 1
+
+
+def test_a_rail_is_cut_from_the_hedge_just_behind_it() -> None:
+    """A pipe rail (60 points at 5.2 m) with a hedge 0.12 m behind it, dense at its face and
+    thinning over 0.6 m (400 points): no wide valley, but an empty gap."""
+    rng = np.random.default_rng(42)
+    rail = rng.normal(5.2, 0.005, 60)
+    hedge = 5.35 + rng.exponential(0.12, 400).clip(0, 0.6)
+    lateral = np.concatenate([rail, hedge])
+    station = rng.uniform(0.0, 0.5, len(lateral))
+    component = np.zeros(len(lateral), np.int64)
+    segments = slice_components(component, station, PARAMS, lateral)
+    assert len(segments) == 2
+    np.testing.assert_array_equal(segments.n_points, [60, 400])
+    assert (lateral[segments.members(0)] < 5.25).all()
+    # The same rail and hedge in a slice no wider than gap_width_m, or with the cut off, stay one.
+    narrow = SegmentParams(gap_width_m=float(np.ptp(lateral)) + 0.01)
+    assert len(slice_components(component, station, narrow, lateral)) == 1
+    off = SegmentParams(gap_width_m=0.0)
+    assert len(slice_components(component, station, off, lateral)) == 1
+
+
+def test_a_post_behind_its_beam_stays_with_it_across_a_gap() -> None:
+    """A W-beam 0.25 m deep (400 points), its post's few hits 0.2-0.35 m behind it and a
+    sparse scan's clutter at the road edge: gaps of 0.1 m and more, but no piece beside them
+    spans 0.4 m, so nothing is cut."""
+    rng = np.random.default_rng(43)
+    beam = rng.uniform(-4.95, -4.70, 400)
+    post = rng.uniform(-5.30, -5.15, 6)
+    clutter = rng.choice(np.arange(-4.55, -4.25, 0.12), 12)
+    lateral = np.concatenate([beam, post, clutter])
+    station = rng.uniform(0.0, 0.5, len(lateral))
+    segments = slice_components(np.zeros(len(lateral), np.int64), station, PARAMS, lateral)
+    assert np.ptp(lateral) > PARAMS.gap_width_m
+    assert len(segments) == 1
 
 
 def test_a_narrow_or_evenly_filled_slice_stays_whole() -> None:

@@ -68,6 +68,32 @@ def add_parser(subparsers: common.Subparsers) -> None:
         metavar="METRES",
         help="with --scanner multibeam: metres between frames (default 60)",
     )
+    own.add_argument(
+        "--range-noise",
+        type=float,
+        metavar="METRES",
+        help="1 sigma of the range noise (default 0.005 profile, 0.02 multibeam)",
+    )
+    own.add_argument(
+        "--dropout",
+        type=float,
+        metavar="P",
+        help="probability of losing any return, on top of weak and porous surfaces' losses "
+        "(default 0.01)",
+    )
+    own.add_argument(
+        "--intensity-gain",
+        type=float,
+        metavar="FACTOR",
+        help="factor on every intensity: a scanner calibrated differently (default 1)",
+    )
+    own.add_argument(
+        "--no-roadside",
+        dest="roadside",
+        action="store_false",
+        help="a random scene's verges level and bare: no embankments, ditches, hedges, shrubs "
+        "or tall grass",
+    )
     parser = subparsers.add_parser(
         "simulate",
         help="simulate a mapping drive with exact ground truth",
@@ -89,15 +115,33 @@ def run(args: argparse.Namespace) -> int:
             print(
                 "note: --length is ignored with --scene (the spec sets the drive)", file=sys.stderr
             )
+        if not args.roadside:
+            print(
+                "note: --no-roadside is ignored with --scene (the spec sets the verges)",
+                file=sys.stderr,
+            )
     else:
         designs = args.designs.split(",") if args.designs else None
         spec = random_scene_spec(
-            args.seed, args.length if args.length is not None else 100.0, designs=designs
+            args.seed,
+            args.length if args.length is not None else 100.0,
+            designs=designs,
+            roadside=args.roadside,
         )
+    scanner = dict(spec.get("scanner") or {})
     if args.scanner:
-        spec["scanner"] = {**(spec.get("scanner") or {}), "kind": args.scanner}
+        scanner["kind"] = args.scanner
         if args.frame_every is not None:
-            spec["scanner"]["frame_every_m"] = args.frame_every
+            scanner["frame_every_m"] = args.frame_every
+    for key, value in (
+        ("range_noise_m", args.range_noise),
+        ("dropout", args.dropout),
+        ("intensity_gain", args.intensity_gain),
+    ):
+        if value is not None:
+            scanner[key] = value
+    if scanner:
+        spec["scanner"] = scanner
     from guardrail_core.formats.drive_tiles import DEFAULT_DRIVE_TILE_M
 
     options = SimulationOptions(

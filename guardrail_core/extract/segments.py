@@ -102,6 +102,32 @@ class SegmentParams(StageParams):
         "(each such run is a piece of its own); narrower thin stretches (a post behind its "
         "rail, the dip between a beam's ridges) do not cut",
     )
+    gap_width_m: float = param(
+        0.6,
+        unit="m",
+        ge=0,
+        le=100,
+        doc="a slice wider than this across the trajectory is also cut at every empty gap of "
+        "min_gap_m or more: a hedge or a bush just behind a rail, which a link of "
+        "link_distance_m joins to it, with no wide valley between them; 0 turns this off. "
+        "A guardrail's slice (a beam and its posts) is narrower",
+    )
+    min_gap_m: float = param(
+        0.1,
+        unit="m",
+        gt=0,
+        le=100,
+        doc="an empty stretch across the trajectory at least this wide cuts a slice wider than "
+        "gap_width_m, where the points on one side of it span gap_piece_m or more",
+    )
+    gap_piece_m: float = param(
+        0.4,
+        unit="m",
+        ge=0,
+        le=100,
+        doc="a gap cuts only beside a piece at least this wide across (a hedge, a bush): a post "
+        "0.1-0.3 m behind its beam, or the scattered hits of a sparse scan's post, stay with it",
+    )
 
 
 @dataclass(frozen=True)
@@ -320,8 +346,11 @@ def slice_components(
     n_components = int(component[kept].max()) + 1
     key = (slices - first_slice) * n_components + component[kept]
     unique_keys, segment_of_kept = np.unique(key, return_inverse=True)
-    if lateral is not None and params.max_width_m > 0:
-        piece = _lateral_pieces(segment_of_kept, np.asarray(lateral, np.float64)[kept], params)
+    if lateral is not None and (params.max_width_m > 0 or params.gap_width_m > 0):
+        across = np.asarray(lateral, np.float64)[kept]
+        piece = _lateral_pieces(segment_of_kept, across, params)
+        gaps = _gap_pieces(segment_of_kept, across, params)
+        piece = piece * (int(gaps.max(initial=0)) + 1) + gaps
         if piece.any():
             # Pieces of one slice keep its key; they are told apart by a second key.
             n_pieces = int(piece.max()) + 1
@@ -351,14 +380,11 @@ def _lateral_pieces(segment: np.ndarray, lateral: np.ndarray, params: SegmentPar
     ``min_valley_m`` wide is a piece, and so is each stretch between such runs.
     """
     piece = np.zeros(len(segment), np.int64)
-    n_seg = int(segment.max()) + 1 if len(segment) else 0
-    low = np.full(n_seg, np.inf)
-    high = np.full(n_seg, -np.inf)
-    np.minimum.at(low, segment, lateral)
-    np.maximum.at(high, segment, lateral)
+    low, high = _lateral_bounds(segment, lateral)
     wide = np.flatnonzero(high - low > params.max_width_m)
-    if len(wide) == 0:
+    if params.max_width_m <= 0 or len(wide) == 0:
         return piece
+    n_seg = len(low)
     # Every wide slice's bins laid end to end: cell = its first bin + the point's bin.
     n_bins = np.zeros(n_seg, np.int64)
     n_bins[wide] = ((high[wide] - low[wide]) / params.width_bin_m).astype(np.int64) + 1
@@ -385,6 +411,51 @@ def _lateral_pieces(segment: np.ndarray, lateral: np.ndarray, params: SegmentPar
     run = runs(valley)
     piece[members] = (run - run[first_bin[owner]])[cell]
     return piece
+
+
+def _gap_pieces(segment: np.ndarray, lateral: np.ndarray, params: SegmentParams) -> np.ndarray:
+    """(K,) int64: the piece of its slice each point falls in (0 for slices left whole).
+
+    A slice wider than ``gap_width_m`` is cut at every empty stretch across it at least
+    ``min_gap_m`` wide that has, on one side or the other, a run of points spanning at least
+    ``gap_piece_m`` before the next such stretch: its points sorted across, each such step
+    between neighbours starts the next piece.
+    """
+    piece = np.zeros(len(segment), np.int64)
+    if params.gap_width_m <= 0 or len(segment) == 0:
+        return piece
+    low, high = _lateral_bounds(segment, lateral)
+    order = np.lexsort((lateral, segment))
+    s, across = segment[order], lateral[order]
+    first = np.concatenate([[True], s[1:] != s[:-1]])
+    step = np.zeros(len(order), bool)
+    step[1:] = (
+        ~first[1:]
+        & (np.diff(across) >= params.min_gap_m)
+        & (high - low > params.gap_width_m)[s[1:]]
+    )
+    # Runs between gaps (and slice ends), contiguous in this order, and how wide each spans.
+    starts = np.flatnonzero(step | first)
+    ends = np.append(starts[1:], len(order)) - 1
+    wide = across[ends] - across[starts] >= params.gap_piece_m - _ROUNDING_M
+    run = np.cumsum(step | first) - 1
+    # A gap starts run r: it cuts when run r or run r - 1 is wide.
+    cut = step.copy()
+    at = np.flatnonzero(step)
+    cut[at] = wide[run[at]] | wide[run[at] - 1]
+    count = np.cumsum(cut)
+    piece[order] = count - np.maximum.accumulate(np.where(first, count, 0))
+    return piece
+
+
+def _lateral_bounds(segment: np.ndarray, lateral: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Smallest and largest lateral offset (S,) of each slice."""
+    n_seg = int(segment.max()) + 1 if len(segment) else 0
+    low = np.full(n_seg, np.inf)
+    high = np.full(n_seg, -np.inf)
+    np.minimum.at(low, segment, lateral)
+    np.maximum.at(high, segment, lateral)
+    return low, high
 
 
 @dataclass(frozen=True)

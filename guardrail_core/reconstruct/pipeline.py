@@ -260,6 +260,17 @@ def reconstruct_run(
         chosen = chosen[:max_units]
     used = [unit_points[u] for u in chosen]
     length = float(np.median([f.length for f in frames]))
+    pole_radius = float(np.median([p.radius for p in poles]))
+    if length <= 2 * (pole_radius + params.pipes.pole_margin_m):
+        # Two "poles" closer than their own width and margins (stems in a bush beside a rail):
+        # there is no unit between them to model.
+        notes.append(
+            f"poles {length:.2f} m apart: no room for a unit between them, so no unit shape "
+            "was reconstructed"
+        )
+        return RunModel(
+            run_id, poles, frames, None, np.zeros(len(frames), bool), len(xyz), notes
+        ), None
     stacked = np.concatenate(used)
     beam = len(used) > 1 and len(stacked) > 0 and unit_type(stacked, length, params.beams) == "beam"
     superimposed = superimpose(used, params.register, beam=beam)
@@ -279,7 +290,7 @@ def reconstruct_run(
     model = unit_model(
         superimposed.points,
         length,
-        pole_radius=float(np.median([p.radius for p in poles])),
+        pole_radius=pole_radius,
         pole_height=float(np.median([p.height for p in poles])),
         n_units=len(used),
         params=params,

@@ -77,6 +77,14 @@ SURFACES: dict[str, Material] = {
     "cloth_dark": Material((0.08, 0.08, 0.12), 0.20, specular=0.0, texture=0.10),
     "cloth_light": Material((0.60, 0.55, 0.45), 0.45, specular=0.0, texture=0.10),
     "skin": Material((0.60, 0.45, 0.35), 0.40, specular=0.1, texture=0.02),
+    # Clipped evergreen hedges (azalea, box) and unmown verge grass: the laser goes in between
+    # the leaves and blades, so many pulses come back from deeper in or not at all.
+    "hedge": Material(
+        (0.05, 0.17, 0.05), 0.40, specular=0.0, texture=0.6, texture_scale_m=0.05, dropout=0.25
+    ),
+    "tall_grass": Material(
+        (0.25, 0.32, 0.10), 0.35, specular=0.0, texture=0.5, texture_scale_m=0.03, dropout=0.2
+    ),
 }
 
 MATERIALS: dict[str, Material] = {**PAINTS, **SURFACES}

@@ -2,7 +2,8 @@
 
 Positions along the road are given by ``s`` (metres along the centreline) and ``lateral``
 (metres to the left of the centreline, negative to the right). The carriageway is crowned;
-curbs raise the sidewalks; a grass verge runs beyond them.
+curbs raise the sidewalks; a grass verge runs beyond them, level or on an embankment that rises
+or falls away from the road, with or without a ditch along its foot (:class:`Roadside`).
 """
 
 from __future__ import annotations
@@ -16,6 +17,36 @@ from guardrail_core.geom.mesh import grid_surface
 from guardrail_core.synth.mesh import MeshBuilder
 
 SIDES = {"left": 1.0, "right": -1.0}
+
+
+@dataclass(frozen=True)
+class Roadside:
+    """The ground beyond a sidewalk: an embankment and a ditch.
+
+    Attributes
+    ----------
+    slope : float, m/m, rise of the verge away from the road (negative: it falls, a fill slope
+        down from the road; positive: a cut slope up from it)
+    ditch_depth_m, ditch_width_m : float, metres, a ditch of rounded section along the sidewalk's
+        outer edge (depth 0: none); the slope starts beyond it
+    """
+
+    slope: float = 0.0
+    ditch_depth_m: float = 0.0
+    ditch_width_m: float = 1.0
+
+    @property
+    def level(self) -> bool:
+        return self.slope == 0.0 and self.ditch_depth_m == 0.0
+
+    def height(self, beyond: np.ndarray) -> np.ndarray:
+        """Height (N,) metres over a level verge at ``beyond`` (N,) metres past the sidewalk."""
+        d = np.maximum(np.asarray(beyond, np.float64), 0.0)
+        w = self.ditch_width_m if self.ditch_depth_m > 0 else 0.0
+        ditch = np.where(
+            d < w, -0.5 * self.ditch_depth_m * (1 - np.cos(2 * np.pi * d / max(w, 1e-9))), 0.0
+        )
+        return ditch + self.slope * np.maximum(d - w, 0.0)
 
 
 @dataclass(frozen=True)
@@ -34,6 +65,7 @@ class RoadSpec:
     curb_height, curb_width : float, metres
     sidewalk_left, sidewalk_right : float, metres
     verge : float, metres of grass beyond each sidewalk
+    roadside_left, roadside_right : the lie of the verge on each side
     dash_m : (on, off) metres of the dashed lane lines
     """
 
@@ -49,6 +81,8 @@ class RoadSpec:
     sidewalk_left: float = 2.5
     sidewalk_right: float = 2.5
     verge: float = 6.0
+    roadside_left: Roadside = Roadside()
+    roadside_right: Roadside = Roadside()
     dash_m: tuple[float, float] = (5.0, 5.0)
 
 
@@ -99,7 +133,14 @@ class Road:
         road = self.centre_height(s) - spec.crown_slope * np.minimum(a, hw)
         # Beyond the curb the sidewalk rises 1% away from the road so rain drains to it.
         off_road = spec.curb_height + 0.01 * np.maximum(a - hw - spec.curb_width, 0.0)
-        return road + np.where(a > hw, off_road, 0.0)
+        walk_edge = (
+            hw + spec.curb_width + np.where(lateral > 0, spec.sidewalk_left, spec.sidewalk_right)
+        )
+        beyond = a - walk_edge
+        verge = np.where(
+            lateral > 0, spec.roadside_left.height(beyond), spec.roadside_right.height(beyond)
+        )
+        return road + np.where(a > hw, off_road, 0.0) + np.where(beyond > 0, verge, 0.0)
 
     def point(self, s: np.ndarray, lateral: np.ndarray) -> np.ndarray:
         """Ground points (N, 3) at (s, lateral)."""
@@ -116,13 +157,16 @@ class Road:
     def sidewalk_width(self, side: str) -> float:
         return self.spec.sidewalk_left if side == "left" else self.spec.sidewalk_right
 
+    def roadside(self, side: str) -> Roadside:
+        return self.spec.roadside_left if side == "left" else self.spec.roadside_right
+
     # ------------------------------------------------------------------ meshes
     def _strip(
-        self, s: np.ndarray, l0: float, l1: float, lift: float = 0.0
+        self, s: np.ndarray, l0: float, l1: float, columns: int = 2
     ) -> tuple[np.ndarray, np.ndarray]:
-        laterals = np.array([l0, l1])
+        """The ground from lateral ``l0`` to ``l1`` at the stations ``s``, in ``columns``."""
+        laterals = np.linspace(l0, l1, columns)
         grid = np.stack([self.point(s, np.full_like(s, lat)) for lat in laterals], axis=1)
-        grid[..., 2] += lift
         if l1 < l0:  # keep the faces wound upward
             grid = grid[:, ::-1]
         return grid_surface(grid)
@@ -187,8 +231,13 @@ class Road:
             builder.add(
                 self._strip(s, outer, walk), cls=TruthClass.SIDEWALK, object_id=0, material="paving"
             )
+            # A level verge is one flat strip; an embankment or a ditch a column every 0.25 m.
+            columns = 2 if self.roadside(side).level else int(np.ceil(spec.verge / 0.25)) + 1
             builder.add(
-                self._strip(s, walk, verge), cls=TruthClass.TERRAIN, object_id=0, material="grass"
+                self._strip(s, walk, verge, columns),
+                cls=TruthClass.TERRAIN,
+                object_id=0,
+                material="grass",
             )
 
     def _add_dashes(

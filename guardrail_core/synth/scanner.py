@@ -41,6 +41,13 @@ class ReturnModel(StageParams):
         15.0, unit="m", gt=0, le=1000, doc="beyond this the received signal falls as 1 / r^2"
     )
     intensity_noise: float = param(0.04, ge=0, le=10, doc="relative 1 sigma of the intensity")
+    intensity_gain: float = param(
+        1.0,
+        gt=0,
+        le=100,
+        doc="factor on every recorded intensity: a scanner whose intensity is calibrated "
+        "differently (clipped at the format's maximum)",
+    )
 
 
 @dataclass(frozen=True)
@@ -124,8 +131,10 @@ def measure_returns(
     measured = rng_m + rng.normal(0.0, scanner.range_noise_m, len(idx))
     xyz = origin[idx] + direction[idx] * measured[:, None]
     # Intensity: square root compresses the dynamic range the way scanners report it.
-    level = np.sqrt(np.clip(signal, 0, 1)) * (
-        1 + returns.intensity_noise * rng.standard_normal(len(idx))
+    level = (
+        returns.intensity_gain
+        * np.sqrt(np.clip(signal, 0, 1))
+        * (1 + returns.intensity_noise * rng.standard_normal(len(idx)))
     )
     intensity = np.clip(level * 65535, 0, 65535).astype(np.uint16)
     return idx, xyz, intensity, face

@@ -33,7 +33,8 @@ from guardrail_core.synth.designs import list_designs, load_design
 from guardrail_core.synth.materials import PAINTS
 from guardrail_core.synth.mesh import MeshBuilder, SceneMesh
 from guardrail_core.synth.multibeam import MultibeamParams
-from guardrail_core.synth.road import SIDES, Road, RoadSpec
+from guardrail_core.synth.road import SIDES, Road, Roadside, RoadSpec
+from guardrail_core.synth.scanner import ReturnModel
 from guardrail_core.synth.scene_parts import ScenePart, guardrail_parts, object_parts, road_parts
 from guardrail_core.synth.spec_values import spec_value
 from guardrail_core.synth.vehicle import VehicleParams
@@ -133,6 +134,7 @@ def _road_spec(data: object) -> RoadSpec:
         raise SceneSpecError("road.centreline: needs at least one piece")
     curb = spec_value(data, "curb", dict, where, {})
     sidewalk = spec_value(data, "sidewalk", dict, where, {})
+    roadside = spec_value(data, "roadside", dict, where, {})
     lanes = int(spec_value(data, "lanes", int, where, 2))
     if lanes < 1:
         raise SceneSpecError("road.lanes: at least one lane")
@@ -149,7 +151,27 @@ def _road_spec(data: object) -> RoadSpec:
         sidewalk_left=spec_value(sidewalk, "left", float, "road.sidewalk", 2.5),
         sidewalk_right=spec_value(sidewalk, "right", float, "road.sidewalk", 2.5),
         verge=spec_value(data, "verge", float, where, 6.0),
+        roadside_left=_roadside(roadside, "left"),
+        roadside_right=_roadside(roadside, "right"),
     )
+
+
+def _roadside(data: dict, side: str) -> Roadside:
+    """``road.roadside.<side>``: ``slope_percent`` (rise away from the road; negative falls) and
+    an optional ``ditch: {depth, width}`` along the sidewalk's outer edge."""
+    where = f"road.roadside.{side}"
+    item = spec_value(data, side, dict, "road.roadside", {})
+    slope = spec_value(item, "slope_percent", float, where, 0.0)
+    if not -100 <= slope <= 100:
+        raise SceneSpecError(f"{where}.slope_percent: {slope} is steeper than 45 degrees")
+    ditch = spec_value(item, "ditch", dict, where, {})
+    depth = spec_value(ditch, "depth", float, where + ".ditch", 0.0)
+    width = spec_value(ditch, "width", float, where + ".ditch", 1.0)
+    if not 0 <= depth <= 3 or not 0.2 <= width <= 10:
+        raise SceneSpecError(
+            f"{where}.ditch: depth {depth} m must lie in 0..3 and width {width} m in 0.2..10"
+        )
+    return Roadside(slope=slope / 100, ditch_depth_m=depth, ditch_width_m=width)
 
 
 def _vehicle(data: dict, road: Road) -> tuple[VehicleParams, tuple[float, float]]:
@@ -250,6 +272,19 @@ def _scanner(
         raise SceneSpecError(f"scanner: {exc}") from exc
 
 
+def _returns(data: dict) -> ReturnModel:
+    """The ``scanner`` section's ``dropout`` (probability of losing any return, 0..1) and
+    ``intensity_gain`` (factor on every intensity: a scanner calibrated differently)."""
+    defaults = ReturnModel()
+    dropout = spec_value(data, "dropout", float, "scanner", defaults.base_dropout)
+    gain = spec_value(data, "intensity_gain", float, "scanner", defaults.intensity_gain)
+    if not 0 <= dropout <= 1:
+        raise SceneSpecError(f"scanner.dropout: a probability lies in 0..1, got {dropout}")
+    if not 0 < gain <= 100:
+        raise SceneSpecError(f"scanner.intensity_gain: expected a factor in (0, 100], got {gain}")
+    return ReturnModel(base_dropout=dropout, intensity_gain=gain)
+
+
 # ----------------------------------------------------------------------------- building
 
 
@@ -260,6 +295,7 @@ class SceneLayout:
     Attributes
     ----------
     spec, road, vehicle, scanner, multibeam, drive_span, crs, origin : as in :class:`Scene`
+    returns : how surfaces answer the scanner's pulses (dropouts, intensity calibration)
     parts : the road in stretches, then the guardrail runs and street objects in object-id order
         (:mod:`~guardrail_core.synth.scene_parts`)
     """
@@ -273,6 +309,7 @@ class SceneLayout:
     crs: str
     origin: np.ndarray
     multibeam: MultibeamParams | None = None
+    returns: ReturnModel = ReturnModel()
 
 
 def plan_scene(spec: dict, *, seed: int = 0) -> SceneLayout:
@@ -287,6 +324,7 @@ def plan_scene(spec: dict, *, seed: int = 0) -> SceneLayout:
     road = Road(_road_spec(spec.get("road")))
     vehicle, span = _vehicle(spec.get("vehicle") or {}, road)
     scanner, multibeam = _scanner(spec.get("scanner") or {}, vehicle.reference_height_m)
+    returns = _returns(spec.get("scanner") or {})
     rails = guardrail_parts(list(spec.get("guardrails") or []), road, seed, first_id=1)
     objects = object_parts(list(spec.get("objects") or []), road, seed, first_id=1 + len(rails))
     origin = np.asarray(spec.get("origin", DEFAULT_ORIGIN), np.float64)
@@ -304,6 +342,7 @@ def plan_scene(spec: dict, *, seed: int = 0) -> SceneLayout:
         crs=str(spec.get("crs", DEFAULT_CRS)),
         origin=origin,
         multibeam=multibeam,
+        returns=returns,
     )
 
 
@@ -351,11 +390,16 @@ _EXTENT = {
 }
 
 
-def random_scene_spec(seed: int, length: float, designs: Sequence[str] | None = None) -> dict:
+def random_scene_spec(
+    seed: int, length: float, designs: Sequence[str] | None = None, *, roadside: bool = True
+) -> dict:
     """A random street ``length`` metres long (plus run-in and run-out) mixing every design and kind.
 
     Guardrail runs take turns through ``designs`` (default: all shipped designs); confounders take
     turns through all kinds, so a drive of ~150 m or more holds each of them at least once.
+    ``roadside``: the verges get embankments, ditches, hedges, shrubs and tall grass
+    (:func:`_green_roadside`), drawn from a stream of their own: the road, guardrails and other
+    objects are those of the same seed without them.
     """
     if length < 20:
         raise SceneSpecError(f"--length: a drive needs at least 20 m, got {length} m")
@@ -477,6 +521,11 @@ def random_scene_spec(seed: int, length: float, designs: Sequence[str] | None = 
                 if at + extent < total - 1:
                     objects.append(item)
                 at += extent + float(rng.uniform(3, 15 if zone != "far" else 6))
+    if roadside:
+        road["roadside"], green = _green_roadside(
+            np.random.default_rng([seed, 21]), guardrails, sidewalk, total
+        )
+        objects.extend(green)
     return {
         "name": f"random-{seed}",
         "crs": DEFAULT_CRS,
@@ -486,6 +535,87 @@ def random_scene_spec(seed: int, length: float, designs: Sequence[str] | None = 
         "guardrails": guardrails,
         "objects": objects,
     }
+
+
+def _green_roadside(
+    rng: np.random.Generator, guardrails: list[dict], sidewalk: dict, total: float
+) -> tuple[dict, list[dict]]:
+    """The lie of each verge and the vegetation along it: ``road.roadside`` and object items.
+
+    Per side: a level verge (40 %), an embankment rising (30 %) or falling (30 %) at 15-50 %,
+    with a ditch at its foot one time in three. Behind a guardrail run, one time in three, a
+    clipped hedge (a planting strip) from just behind its rails, and one time in four a shrub
+    pressed against them; shrubs every 5-25 m and patches of tall grass along the verge.
+    """
+    curb_width = 0.18
+    profile: dict = {}
+    items: list[dict] = []
+    for side in SIDES:
+        lie = rng.choice(["level", "up", "down"], p=[0.4, 0.3, 0.3])
+        slope = {"level": 0.0, "up": 1.0, "down": -1.0}[str(lie)] * rng.uniform(15, 50)
+        side_profile: dict = {"slope_percent": round(float(slope), 1)}
+        if rng.random() < 1 / 3:
+            side_profile["ditch"] = {
+                "depth": round(float(rng.uniform(0.3, 0.8)), 2),
+                "width": round(float(rng.uniform(0.8, 2.0)), 2),
+            }
+        profile[side] = side_profile
+        for run in (g for g in guardrails if g["side"] == side):
+            if rng.random() < 1 / 3:
+                depth = float(rng.uniform(0.5, 1.0))
+                start = run["start"] + float(rng.uniform(0, 0.3)) * run["length"]
+                items.append(
+                    {
+                        "kind": "hedge",
+                        "side": side,
+                        "offset": round(run["offset"] + 0.1 + depth / 2 + rng.uniform(0, 0.3), 3),
+                        "at": round(start, 3),
+                        "length": round(
+                            float(rng.uniform(0.5, 1.0)) * (run["start"] + run["length"] - start),
+                            2,
+                        ),
+                        "depth": round(depth, 2),
+                        "height": round(float(rng.uniform(0.6, 1.3)), 2),
+                    }
+                )
+            if rng.random() < 1 / 4:
+                width = float(rng.uniform(0.6, 1.6))
+                items.append(
+                    {
+                        "kind": "shrub",
+                        "side": side,
+                        "offset": round(run["offset"] + 0.05 + width / 2, 3),
+                        "at": round(run["start"] + float(rng.uniform(0, run["length"])), 3),
+                        "width": round(width, 2),
+                    }
+                )
+        verge = sidewalk[side] + curb_width
+        at = float(rng.uniform(2, 15))
+        while at < total - 5:
+            items.append(
+                {
+                    "kind": "shrub",
+                    "side": side,
+                    "offset": round(verge + float(rng.uniform(0.5, 4.0)), 3),
+                    "at": round(at, 3),
+                }
+            )
+            at += float(rng.uniform(5, 25))
+        at = float(rng.uniform(0, 10))
+        while at < total - 6:
+            patch = float(rng.uniform(5, 20))
+            patch = min(patch, total - 1 - at)
+            items.append(
+                {
+                    "kind": "tall_grass",
+                    "side": side,
+                    "offset": round(verge + float(rng.uniform(0.0, 1.0)), 3),
+                    "at": round(at, 3),
+                    "length": round(patch, 2),
+                }
+            )
+            at += patch + float(rng.uniform(3, 15))
+    return profile, items
 
 
 def _object(kind: str, side: str, at: float, walk: float, rng: np.random.Generator) -> dict:

@@ -23,6 +23,13 @@ from guardrail_core.synth.mesh import MeshBuilder, SceneMesh
 from guardrail_core.synth.random_streams import child_rng
 from guardrail_core.synth.road import SIDES, Road
 from guardrail_core.synth.spec_values import spec_paint, spec_side, spec_value
+from guardrail_core.synth.vegetation import (
+    EXTENDED_VEGETATION,
+    SIZES,
+    VEGETATION_KINDS,
+    build_vegetation,
+    vegetation_sizes,
+)
 
 #: Mesh rows of road per part: 25 m at the road mesh's 0.5 m rows.
 ROAD_ROWS_PER_PART = 50
@@ -112,12 +119,15 @@ def object_parts(items: list, road: Road, seed: int, first_id: int) -> list[Scen
         if not isinstance(item, dict):
             raise SceneSpecError(f"{where}: expected a mapping")
         kind = spec_value(item, "kind", str, where)
-        if kind not in CONFOUNDER_KINDS:
+        if kind not in CONFOUNDER_KINDS and kind not in VEGETATION_KINDS:
             raise SceneSpecError(
-                f"{where}.kind: unknown kind {kind!r} (known: {', '.join(CONFOUNDER_KINDS)})"
+                f"{where}.kind: unknown kind {kind!r} "
+                f"(known: {', '.join(CONFOUNDER_KINDS + VEGETATION_KINDS)})"
             )
         side = spec_side(item, where)
         offset = spec_value(item, "offset", float, where, 1.0)
+        if kind in VEGETATION_KINDS:
+            _check_vegetation(item, kind, where)
         at = item.get("at")
         positions = at if isinstance(at, list) else [at]
         for j, s in enumerate(positions):
@@ -125,7 +135,8 @@ def object_parts(items: list, road: Road, seed: int, first_id: int) -> list[Scen
                 raise SceneSpecError(
                     f"{where}.at: {s!r} is not a position on the road (0..{road.length:.1f} m)"
                 )
-            thing = _StreetObject(
+            make = _Vegetation if kind in VEGETATION_KINDS else _StreetObject
+            thing = make(
                 road=road,
                 seed=seed,
                 object_id=first_id + len(parts),
@@ -140,6 +151,15 @@ def object_parts(items: list, road: Road, seed: int, first_id: int) -> list[Scen
             spec_paint(item, where, part_rng(seed, thing.object_id))  # an unknown paint fails now
             parts.append(ScenePart(f"{where}[{j}]", thing))
     return parts
+
+
+def _check_vegetation(item: dict, kind: str, where: str) -> None:
+    """A vegetation item's sizes (positive metres) and, for a hedge or grass, its length."""
+    for key in SIZES[kind]:
+        if key in item and not 0.05 <= spec_value(item, key, float, where) <= 10:
+            raise SceneSpecError(f"{where}.{key}: {item[key]} m is not a size in 0.05..10 m")
+    if kind in EXTENDED_VEGETATION and not spec_value(item, "length", float, where) > 0.1:
+        raise SceneSpecError(f"{where}.length: {kind} needs a length over 0.1 m")
 
 
 @dataclass(frozen=True)
@@ -217,6 +237,41 @@ class _StreetObject:
             toward_road=-SIDES[self.side] * left[0],
             length=float(self.item.get("length", 0.0)),
             paint=paint,
+            object_id=self.object_id,
+            builder=builder,
+            rng=rng,
+        )
+        record.update(
+            {"side": self.side, "offset": self.offset, "at": self.at, "index": self.index}
+        )
+        return record
+
+
+@dataclass(frozen=True)
+class _Vegetation:
+    """A hedge, shrub or patch of tall grass of the spec (position ``index`` of ``item``)."""
+
+    road: Road
+    seed: int
+    object_id: int
+    item: dict
+    where: str
+    kind: str
+    side: str
+    offset: float
+    at: float
+    index: int
+
+    def __call__(self, builder: MeshBuilder) -> dict:
+        rng = part_rng(self.seed, self.object_id)
+        record = build_vegetation(
+            self.kind,
+            road=self.road,
+            side=self.side,
+            offset=self.offset,
+            at=self.at,
+            length=float(self.item.get("length", 0.0)),
+            sizes=vegetation_sizes(self.kind, self.item, rng),
             object_id=self.object_id,
             builder=builder,
             rng=rng,

@@ -150,7 +150,7 @@ def simulate_drive(
             ) as bar:
                 scene = SceneWindows(layout.parts, reach + 1.0, progress=bar.update)
 
-        plan = plan_scan(trajectory, scanner, layout.multibeam, scan_seq)
+        plan = plan_scan(trajectory, scanner, layout.multibeam, scan_seq, returns=layout.returns)
         cameras = default_camera_rig(width=options.image_size[0], height=options.image_size[1])
         shots = shot_times(trajectory, options.image_every_m)
         shooter = ShotWriter(
