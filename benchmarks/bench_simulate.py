@@ -41,7 +41,9 @@ TARGET_PEAK_MB = 3000.0
 STAGES = ("scene", "scanner", "cameras", "write")
 
 
-def _simulate_once(out: str, length: float, seed: int, tile_m: float, image_every: float) -> dict:
+def _simulate_once(
+    out: str, length: float, seed: int, tile_m: float, image_every: float, roadside: bool = True
+) -> dict:
     """Simulate one drive in this process; its summary and this process's peak memory."""
     from guardrail_core.synth.scene import random_scene_spec
     from guardrail_core.synth.simulate import simulate_drive
@@ -49,8 +51,8 @@ def _simulate_once(out: str, length: float, seed: int, tile_m: float, image_ever
     options = SimulationOptions(image_every_m=image_every)
     clock = time.perf_counter()
     summary = simulate_drive(
-        random_scene_spec(seed, length), out, seed=seed, options=options, progress=False,
-        tile_m=tile_m,
+        random_scene_spec(seed, length, roadside=roadside), out, seed=seed, options=options,
+        progress=False, tile_m=tile_m,
     )  # fmt: skip
     wall = time.perf_counter() - clock
     total = float(sum(summary.seconds.values()))
@@ -71,7 +73,12 @@ def _simulate_once(out: str, length: float, seed: int, tile_m: float, image_ever
 
 
 def run(
-    repeats: int, lengths: list[float], seed: int, tile_m: float = 100.0, image_every: float = 5.0
+    repeats: int,
+    lengths: list[float],
+    seed: int,
+    tile_m: float = 100.0,
+    image_every: float = 5.0,
+    roadside: bool = True,
 ) -> dict:
     """Simulate each drive ``repeats`` times, each in a fresh process; return the measurements
     as a JSON-able dict."""
@@ -83,7 +90,9 @@ def run(
             for i in range(repeats):
                 out = str(Path(tmp) / f"{length:g}m-run{i + 1}")
                 with context.Pool(1) as pool:
-                    result = pool.apply(_simulate_once, (out, length, seed, tile_m, image_every))
+                    result = pool.apply(
+                        _simulate_once, (out, length, seed, tile_m, image_every, roadside)
+                    )
                 runs.append({"length": length, "run": i + 1, **result})
     by_length = {}
     for length in lengths:
@@ -100,6 +109,7 @@ def run(
         "benchmark": "simulate",
         "lengths_m": lengths,
         "seed": seed,
+        "roadside": roadside,
         "repeats": repeats,
         "tile_m": tile_m,
         "measurements_per_s": ScannerParams().measurement_rate_hz,
@@ -194,11 +204,17 @@ def main(argv: list[str] | None = None) -> int:
         default=5.0,
         help="metres between camera shots (default 5, the simulator's default)",
     )
+    parser.add_argument(
+        "--no-roadside",
+        dest="roadside",
+        action="store_false",
+        help="level, bare verges (no vegetation): what a street cost before green roadsides",
+    )
     parser.add_argument("--json", action="store_true", help="print one JSON object instead")
     args = parser.parse_args(argv)
     if args.repeats < 1:
         parser.error("--repeats must be at least 1")
-    result = run(args.repeats, args.length, args.seed, args.tile_m, args.image_every)
+    result = run(args.repeats, args.length, args.seed, args.tile_m, args.image_every, args.roadside)
     print(json.dumps(result, indent=2) if args.json else format_table(result))
     return 0
 

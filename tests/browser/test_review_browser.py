@@ -175,7 +175,9 @@ def test_review_app_in_the_browser(
         # The action is over once the page has loaded the segment again and shown it.
         expect(body).to_have_attribute("data-actions", str(done + 1), timeout=WAIT_MS)
         expect(page.locator("#selected-label")).to_have_attribute("data-label", flipped)
-        expect(page.locator("#selected-reviewed")).to_have_attribute("data-reviewed", "true")
+        expect(page.locator("#selected-reviewed")).to_have_attribute(
+            "data-reviewed", "true", timeout=WAIT_MS
+        )
         row = _get(f"{server.url}/api/segments/{s}")
         assert row["label"] == flipped and row["reviewed"] is True
         assert row["history"][0]["who"] == "browser-test"
@@ -296,8 +298,9 @@ def test_review_app_in_the_browser(
         expect(page.locator("#lasso-line")).to_be_visible(timeout=WAIT_MS)
         taken = _get(f"{server.url}/api/selection")["lasso_points"]
         assert taken > 0
-        expect(scene).to_contain_text(f"Lasso: {taken:,} points")
-        expect(page.locator("#lasso-line")).to_contain_text(f"{taken:,} points")
+        # The scene's panel and the page follow the server's selection when they next hear of it.
+        expect(scene).to_contain_text(f"Lasso: {taken:,} points", timeout=WAIT_MS)
+        expect(page.locator("#lasso-line")).to_contain_text(f"{taken:,} points", timeout=WAIT_MS)
         before = _get(f"{server.url}/api/info")["label_counts"]
         page.locator("#selected-id").click()
         done = int(body.get_attribute("data-actions") or 0)
@@ -327,7 +330,9 @@ def test_review_app_in_the_browser(
         expect(body).to_have_attribute("data-state", "ready", timeout=WAIT_MS)
         expect(page.locator("#selected-id")).to_have_text(str(s))
         expect(page.locator("#selected-label")).to_have_attribute("data-label", flipped)
-        expect(page.locator("#selected-reviewed")).to_have_attribute("data-reviewed", "true")
+        expect(page.locator("#selected-reviewed")).to_have_attribute(
+            "data-reviewed", "true", timeout=WAIT_MS
+        )
 
         # Fine-tune from the labels, see the new model beside the current one, activate it.
         before = _get(f"{server.url}/api/models")["active"]
@@ -335,7 +340,7 @@ def test_review_app_in_the_browser(
             page.locator("#train").click()
         assert answer.value.status == 202, answer.value.text()
         expect(page.locator("#activate")).to_be_visible(timeout=JOB_MS)
-        expect(page.locator("#compare-table")).to_contain_text("guardrail")
+        expect(page.locator("#compare-table")).to_contain_text("guardrail", timeout=WAIT_MS)
         page.screenshot(path=shots / "fine-tune.png")
         done = int(body.get_attribute("data-actions") or 0)
         with page.expect_response(_api("POST", "/api/models/*/activate"), timeout=JOB_MS) as answer:
@@ -344,7 +349,7 @@ def test_review_app_in_the_browser(
         active = answer.value.json()["active"]
         assert active != before and _get(f"{server.url}/api/models")["active"] == active
         expect(body).to_have_attribute("data-actions", str(done + 1), timeout=WAIT_MS)
-        expect(page.locator("#header-model")).to_contain_text(active[:15])
+        expect(page.locator("#header-model")).to_contain_text(active[:15], timeout=WAIT_MS)
         row = _get(f"{server.url}/api/segments/{s}")
         assert row["label"] == flipped, "an operator's label outlives a model change"
 
