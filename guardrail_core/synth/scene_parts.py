@@ -248,19 +248,8 @@ class _StreetObject:
 
 
 @dataclass(frozen=True)
-class _Vegetation:
-    """A hedge, shrub or patch of tall grass of the spec (position ``index`` of ``item``)."""
-
-    road: Road
-    seed: int
-    object_id: int
-    item: dict
-    where: str
-    kind: str
-    side: str
-    offset: float
-    at: float
-    index: int
+class _Vegetation(_StreetObject):
+    """A hedge, shrub or patch of tall grass of the spec: laid on the ground, not a rigid object."""
 
     def __call__(self, builder: MeshBuilder) -> dict:
         rng = part_rng(self.seed, self.object_id)
