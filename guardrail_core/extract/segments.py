@@ -108,9 +108,9 @@ class SegmentParams(StageParams):
         ge=0,
         le=100,
         doc="a slice wider than this across the trajectory is also cut at every empty gap of "
-        "min_gap_m or more: a hedge or a bush just behind a rail, which a link of "
-        "link_distance_m joins to it, with no wide valley between them; 0 turns this off. "
-        "A guardrail's slice (a beam and its posts) is narrower",
+        "min_gap_m or more beside a piece of gap_piece_m: a hedge or a bush just behind a rail, "
+        "which a link of link_distance_m joins to it, with no wide valley between them; 0 turns "
+        "this off. A guardrail's slice (a beam and its posts) is narrower",
     )
     min_gap_m: float = param(
         0.1,
