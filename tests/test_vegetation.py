@@ -154,6 +154,10 @@ BAD_SPECS = [
         r"objects\[0\]\.height: -1 m is not a size",
     ),
     ({"objects": [{"kind": "hedgehog", "side": "left", "at": 10}]}, r"known: .*tall_grass"),
+    (
+        {"objects": [{"kind": "tall_grass", "side": "left", "at": 89.99, "length": 5}]},
+        r"objects\[0\]\.at: a tall_grass at 89.99 m has no road left",
+    ),
     ({"road": {"roadside": {"left": {"slope_percent": 150}}}}, r"roadside\.left\.slope_percent"),
     ({"road": {"roadside": {"right": {"ditch": {"depth": 5}}}}}, r"roadside\.right\.ditch"),
     ({"scanner": {"dropout": 1.5}}, r"scanner\.dropout"),

@@ -135,6 +135,11 @@ def object_parts(items: list, road: Road, seed: int, first_id: int) -> list[Scen
                 raise SceneSpecError(
                     f"{where}.at: {s!r} is not a position on the road (0..{road.length:.1f} m)"
                 )
+            if kind in EXTENDED_VEGETATION and road.length - s <= 0.1:
+                raise SceneSpecError(
+                    f"{where}.at: a {kind} at {s} m has no road left to grow along "
+                    f"(the road ends at {road.length:.1f} m)"
+                )
             make = _Vegetation if kind in VEGETATION_KINDS else _StreetObject
             thing = make(
                 road=road,
