@@ -348,8 +348,9 @@ def slice_components(
     unique_keys, segment_of_kept = np.unique(key, return_inverse=True)
     if lateral is not None and (params.max_width_m > 0 or params.gap_width_m > 0):
         across = np.asarray(lateral, np.float64)[kept]
-        piece = _lateral_pieces(segment_of_kept, across, params)
-        gaps = _gap_pieces(segment_of_kept, across, params)
+        bounds = _lateral_bounds(segment_of_kept, across)
+        piece = _lateral_pieces(segment_of_kept, across, bounds, params)
+        gaps = _gap_pieces(segment_of_kept, across, bounds, params)
         piece = piece * (int(gaps.max(initial=0)) + 1) + gaps
         if piece.any():
             # Pieces of one slice keep its key; they are told apart by a second key.
@@ -372,7 +373,12 @@ def slice_components(
     )
 
 
-def _lateral_pieces(segment: np.ndarray, lateral: np.ndarray, params: SegmentParams) -> np.ndarray:
+def _lateral_pieces(
+    segment: np.ndarray,
+    lateral: np.ndarray,
+    bounds: tuple[np.ndarray, np.ndarray],
+    params: SegmentParams,
+) -> np.ndarray:
     """(K,) int64: the piece of its slice each point falls in (0 for slices left whole).
 
     A slice wider than ``max_width_m`` is binned across (``width_bin_m``); bins with at most
@@ -380,7 +386,7 @@ def _lateral_pieces(segment: np.ndarray, lateral: np.ndarray, params: SegmentPar
     ``min_valley_m`` wide is a piece, and so is each stretch between such runs.
     """
     piece = np.zeros(len(segment), np.int64)
-    low, high = _lateral_bounds(segment, lateral)
+    low, high = bounds
     wide = np.flatnonzero(high - low > params.max_width_m)
     if params.max_width_m <= 0 or len(wide) == 0:
         return piece
@@ -413,7 +419,12 @@ def _lateral_pieces(segment: np.ndarray, lateral: np.ndarray, params: SegmentPar
     return piece
 
 
-def _gap_pieces(segment: np.ndarray, lateral: np.ndarray, params: SegmentParams) -> np.ndarray:
+def _gap_pieces(
+    segment: np.ndarray,
+    lateral: np.ndarray,
+    bounds: tuple[np.ndarray, np.ndarray],
+    params: SegmentParams,
+) -> np.ndarray:
     """(K,) int64: the piece of its slice each point falls in (0 for slices left whole).
 
     A slice wider than ``gap_width_m`` is cut at every empty stretch across it at least
@@ -424,16 +435,16 @@ def _gap_pieces(segment: np.ndarray, lateral: np.ndarray, params: SegmentParams)
     piece = np.zeros(len(segment), np.int64)
     if params.gap_width_m <= 0 or len(segment) == 0:
         return piece
-    low, high = _lateral_bounds(segment, lateral)
-    order = np.lexsort((lateral, segment))
+    low, high = bounds
+    # Only the points of wide slices are sorted: most slices are narrower.
+    members = np.flatnonzero((high - low > params.gap_width_m)[segment])
+    if len(members) == 0:
+        return piece
+    order = members[np.lexsort((lateral[members], segment[members]))]
     s, across = segment[order], lateral[order]
     first = np.concatenate([[True], s[1:] != s[:-1]])
     step = np.zeros(len(order), bool)
-    step[1:] = (
-        ~first[1:]
-        & (np.diff(across) >= params.min_gap_m)
-        & (high - low > params.gap_width_m)[s[1:]]
-    )
+    step[1:] = ~first[1:] & (np.diff(across) >= params.min_gap_m)
     # Runs between gaps (and slice ends), contiguous in this order, and how wide each spans.
     starts = np.flatnonzero(step | first)
     ends = np.append(starts[1:], len(order)) - 1
