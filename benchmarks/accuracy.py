@@ -66,7 +66,7 @@ from guardrail_core.formats.run_folder_paths import RunFolder  # noqa: E402
 from guardrail_core.process import process_drive_folder  # noqa: E402
 from guardrail_core.reconstruct.run_models import load_run_models  # noqa: E402
 from guardrail_core.synth.scene import random_scene_spec  # noqa: E402
-from guardrail_core.synth.simulate import simulate_drive  # noqa: E402
+from guardrail_core.synth.simulate import SIMULATOR_VERSION, simulate_drive  # noqa: E402
 
 #: The benchmark's own seeds (see the rule above); street k (1, 2, ...) has seed FIRST_SEED + k - 1.
 FIRST_SEED = 10001
@@ -94,13 +94,20 @@ def street_seeds(count: int) -> list[int]:
 
 def ensure_street(data: Path, seed: int) -> Path:
     """The street of ``seed`` under ``data``: simulated the first time, and again when the
-    simulator's street for that seed has changed since (its ``truth/scene.yaml`` differs)."""
+    simulator's street for that seed has changed since (its ``truth/scene.yaml`` differs) or
+    the simulator itself has (``drive.json``'s ``source.simulator`` is not
+    :data:`~guardrail_core.synth.simulate.SIMULATOR_VERSION`)."""
     out = data / f"street_{seed}"
     spec = random_scene_spec(seed, LENGTH_M)
     scene = out / "truth" / "scene.yaml"
-    stale = scene.is_file() and yaml.safe_load(scene.read_text()) != spec
-    if stale or not (out / "drive.json").is_file():
-        why = "again: the simulator's street changed" if stale else f"({LENGTH_M:g} m)"
+    header = out / "drive.json"
+    stale = scene.is_file() and (
+        yaml.safe_load(scene.read_text()) != spec
+        or not header.is_file()
+        or json.loads(header.read_text()).get("source", {}).get("simulator") != SIMULATOR_VERSION
+    )
+    if stale or not header.is_file():
+        why = "again: the simulator or its street changed" if stale else f"({LENGTH_M:g} m)"
         print(f"simulating {out.name} {why} ...", file=sys.stderr, flush=True)
         simulate_drive(spec, out, seed=seed, progress=False, overwrite=True)
     return out

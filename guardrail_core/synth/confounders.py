@@ -118,11 +118,16 @@ def _segment_boxes(p0: np.ndarray, p1: np.ndarray, width: float, depth: float) -
     return _boxes((p0 + p1) / 2, size, rotation)
 
 
-def _prism(frame: _Frame, profile: np.ndarray, c0: float, c1: float) -> Mesh:
-    """A closed prism: a convex (along, up) ``profile`` (K, 2) extruded from across c0 to c1."""
+def _prism(frame: _Frame, profile: np.ndarray, c0: float, c1: float, lean: float = 0.0) -> Mesh:
+    """A closed prism: a convex (along, up) ``profile`` (K, 2) extruded from across c0 to c1.
+
+    ``lean``: both sides lean inward by this many metres per metre of height above the
+    profile's lowest point (a car's tumblehome); 0 gives upright sides.
+    """
     k = len(profile)
-    side0 = frame.at(profile[:, 0], c0, profile[:, 1])
-    side1 = frame.at(profile[:, 0], c1, profile[:, 1])
+    inset = lean * (profile[:, 1] - profile[:, 1].min())
+    side0 = frame.at(profile[:, 0], c0 + inset, profile[:, 1])
+    side1 = frame.at(profile[:, 0], c1 - inset, profile[:, 1])
     vertices = np.vstack([side0, side1])
     j = np.arange(k)
     jn = (j + 1) % k
@@ -373,7 +378,12 @@ def _parked_car(f: _Frame, length, paint, add, rng) -> tuple[int, str | None, di
             [-half + 0.45, height - roof_t],
         ]
     )
-    add(_prism(f, cabin, -width / 2 + 0.08, width / 2 - 0.08), cls, "glass")
+    # The side windows start just inside the doors and lean in towards the roof, as on real
+    # cars, so a side seen from the road is one surface from the sills to the roof.
+    lean = 0.35
+    glass_inset = 0.03
+    add(_prism(f, cabin, -width / 2 + glass_inset, width / 2 - glass_inset, lean), cls, "car_glass")
+    roof_inset = glass_inset + lean * (height - roof_t - belt)
     roof = np.array(
         [
             [-half + 0.45, height - roof_t],
@@ -382,7 +392,7 @@ def _parked_car(f: _Frame, length, paint, add, rng) -> tuple[int, str | None, di
             [-half + 0.45, height],
         ]
     )
-    add(_prism(f, roof, -width / 2 + 0.1, width / 2 - 0.1), cls, colour)
+    add(_prism(f, roof, -width / 2 + roof_inset, width / 2 - roof_inset), cls, colour)
     wheelbase = car_len * 0.62
     for a in (-wheelbase / 2, wheelbase / 2):
         for side in (-1.0, 1.0):

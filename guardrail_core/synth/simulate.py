@@ -38,7 +38,8 @@ from guardrail_core.synth.vehicle import drive_along
 
 #: 2: the scene is built per object stream and the scan drawn per chunk of scan time, so that
 #: long drives are simulated in windows and tiles; drives differ from version 1's for a seed.
-SIMULATOR_VERSION = "2"
+#: 3: parked cars' side windows lean in and return as real ones do (``car_glass``).
+SIMULATOR_VERSION = "3"
 
 
 @dataclass(frozen=True)
