@@ -124,6 +124,17 @@ def test_train_needs_truth(
     assert not model.exists()
 
 
+def test_train_refuses_an_unknown_feature_to_ignore(
+    drive_path: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    model = tmp_path / "model"
+    args = ["train", str(drive_path), "--out", str(model), "--quiet"]
+    assert main([*args, "--ignore-features", "intensity_mean,colour"]) == 2
+    err = capsys.readouterr().err
+    assert "ParameterError" in err and "ignored_features" in err and "colour" in err
+    assert not model.exists()
+
+
 def test_train_refuses_an_output_holding_its_drive_before_training(
     drive_path: Path,
     tmp_path: Path,

@@ -16,10 +16,12 @@ from guardrail_core.extract.classify import EMBEDDING_DIM, ClassifierParams, hel
 from guardrail_core.extract.crops import CROP_OK
 from guardrail_core.extract.model_folder import load_model
 from guardrail_core.extract.segment_head import SegmentHeadParams
+from guardrail_core.extract.shape_features import SEGMENT_FEATURE_NAMES
 from guardrail_core.extract.training import HOLD_OUT_BLOCK_SLICES, TrainingSet, train_on_set
 from guardrail_core.formats.label_store import LABEL_GUARDRAIL, LABEL_OTHER, UNLABELLED
 from guardrail_core.formats.run_folder import SEGMENT_FIELDS, Run, load_run
 from guardrail_core.formats.run_info import ModelRef
+from guardrail_core.params import ParameterError
 from guardrail_core.review.run_crops import read_crops
 from guardrail_core.review.training import (
     AGAINST_EFFECTIVE,
@@ -313,6 +315,27 @@ def test_train_on_set_gives_the_held_out_predictions(run_path: Path) -> None:
     assert metrics["n_held_out"] == int(held.sum())
     assert metrics["accuracy"] == pytest.approx(np.mean(data.labels[held] == predicted[held]))
     assert metrics["guardrail"]["n"] == int(data.labels[held].sum())
+
+
+def test_a_segment_head_can_leave_the_intensities_unread(run_path: Path) -> None:
+    run = load_run(run_path)
+    data = training_set_from_run(run, np.full(len(run.point_segment), -1, np.int8))
+    head = SegmentHeadParams(ignored_features="intensity_mean, intensity_std")
+    model = train_on_set(data, params=ClassifierParams(mode="fast"), head=head).model
+    names = model.info["segment_head"]["features"]
+    assert names == [
+        n for n in SEGMENT_FEATURE_NAMES if n not in ("intensity_mean", "intensity_std")
+    ]
+    assert model.segment_head is not None and model.segment_head.n_inputs == len(names) + 2
+    # Another scanner's intensities change nothing.
+    features = data.features.copy()
+    crop = np.full(len(features), np.nan)
+    before = model.segment_proba(features, crop)
+    for name in ("intensity_mean", "intensity_std"):
+        features[:, SEGMENT_FEATURE_NAMES.index(name)] *= 0.3
+    np.testing.assert_array_equal(model.segment_proba(features, crop), before)
+    with pytest.raises(ParameterError, match="ignored_features: .*unknown"):
+        SegmentHeadParams(ignored_features="intensity_mean,colour")
 
 
 def test_train_from_run_on_one_class_of_operator_labels_is_refused(run_path: Path) -> None:

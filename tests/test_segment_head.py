@@ -92,14 +92,34 @@ def test_a_segment_head_of_other_features_is_refused(model_path: Path, tmp_path:
     for name in ("model.json", "weights.npz"):
         (copy / name).write_bytes((model_path / name).read_bytes())
     document = json.loads((copy / "model.json").read_text())
-    document["segment_head"]["features"] = ["height_min_m"]
+    named = document["segment_head"]["features"]
+    document["segment_head"]["features"] = [*named[:-1], "colour_hue"]
     (copy / "model.json").write_text(json.dumps(document))
     with pytest.raises(IncompatibleModelError, match="retrain"):
+        load_model(copy)
+    document["segment_head"]["features"] = named[:-1]  # known, but not what the weights take
+    (copy / "model.json").write_text(json.dumps(document))
+    with pytest.raises(ModelFormatError, match="named"):
         load_model(copy)
     del document["segment_head"]
     (copy / "model.json").write_text(json.dumps(document))
     with pytest.raises(ModelFormatError, match="disagree"):
         load_model(copy)
+
+
+def test_a_head_reads_only_its_columns() -> None:
+    rng = np.random.default_rng(5)
+    features, crop, labels = synthetic(2000, rng)
+    # A noise column in the middle, which the head is told not to read.
+    wide = np.insert(features, 1, rng.normal(size=len(features)) * 100, axis=1)
+    head = fit_segment_head(wide, crop, labels, QUICK, columns=np.array([0, 2, 3]))
+    plain = fit_segment_head(features, crop, labels, QUICK)
+    assert head.n_inputs == plain.n_inputs == 5
+    np.testing.assert_allclose(head.proba(wide, crop), plain.proba(features, crop), atol=1e-6)
+    lo, hi = head.proba_range(wide)
+    np.testing.assert_allclose(np.stack([lo, hi]), np.stack(plain.proba_range(features)), atol=1e-6)
+    with pytest.raises(InvalidOptionError, match="columns it reads"):
+        head.proba(wide[:, :3], crop)
 
 
 def test_the_proba_range_holds_every_crop_probability_and_is_reached() -> None:

@@ -64,7 +64,9 @@ def test_the_embeddings_of_crops_not_asked_are_made_once_and_kept(
     shutil.copytree(run_path, root)
     run = load_run(root)
     has_crop = run.segments["crop_status"] == CROP_OK
-    missing = has_crop & load_model(model_path).shape_decides(run.segments["features"])
+    # Decided as process decides them: with the default clip of the crops' probabilities.
+    clip = ClassifyParams().crop_probability_clip
+    missing = has_crop & load_model(model_path).shape_decides(run.segments["features"], clip)
     assert missing.sum() > 0
     stored = run.embeddings()
     assert stored is not None

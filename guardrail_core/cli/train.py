@@ -10,6 +10,7 @@ from guardrail_core.cli import common
 
 if TYPE_CHECKING:
     from guardrail_core.extract.classify import ClassifierParams, GuardrailClassifier
+    from guardrail_core.extract.segment_head import SegmentHeadParams
 
 
 def add_parser(subparsers: common.Subparsers) -> None:
@@ -41,6 +42,14 @@ def add_parser(subparsers: common.Subparsers) -> None:
         "(default fast)",
     )
     own.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    own.add_argument(
+        "--ignore-features",
+        default="",
+        metavar="NAMES",
+        help="segment features the segment head does not read, comma-separated; "
+        "'intensity_mean,intensity_std' for a model meant for scanners whose intensity is "
+        "calibrated otherwise than the training drives' (default: it reads them all)",
+    )
     parser = subparsers.add_parser(
         "train",
         help="train the guardrail classifier on labelled drives or on operators' labels",
@@ -60,11 +69,13 @@ def add_parser(subparsers: common.Subparsers) -> None:
 def run(args: argparse.Namespace) -> int:
     from guardrail_core.extract.classify import ClassifierParams
     from guardrail_core.extract.model_folder import save_model
+    from guardrail_core.extract.segment_head import SegmentHeadParams
     from guardrail_core.extract.training import train_from_drives
     from guardrail_core.formats.atomic import check_output
     from guardrail_core.formats.drive import drive_parts
 
     params = ClassifierParams(mode=args.mode, seed=args.seed)
+    head = SegmentHeadParams(ignored_features=args.ignore_features)
     if bool(args.drives) == bool(args.run):
         from guardrail_core.errors import InvalidOptionError
 
@@ -73,11 +84,11 @@ def run(args: argparse.Namespace) -> int:
             "review app's label store), not both or neither"
         )
     if args.run:
-        model, inputs = _train_from_labels(args, params)
+        model, inputs = _train_from_labels(args, params, head)
     else:
         inputs = [part for drive in args.drives for part in drive_parts(drive)]
         check_output(args.out, folder=True, overwrite=args.overwrite, inputs=inputs)  # first
-        model = train_from_drives(args.drives, params=params, progress=not args.quiet)
+        model = train_from_drives(args.drives, params=params, head=head, progress=not args.quiet)
     save_model(model, args.out, overwrite=args.overwrite, inputs=inputs)
     print(f"trained a {model.mode} model {model.version} into {args.out}")
     print(held_out_report(model.info))
@@ -85,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _train_from_labels(
-    args: argparse.Namespace, params: ClassifierParams
+    args: argparse.Namespace, params: ClassifierParams, head: SegmentHeadParams
 ) -> tuple[GuardrailClassifier, list[Path]]:
     """The model trained on the run's operator labels, and the inputs it was trained from
     (the model folder is checked against them before training)."""
@@ -108,7 +119,7 @@ def _train_from_labels(
     counts = int((labels >= 0).sum())
     print(f"{counts:,} operator-labelled points from {path}")
     model = train_from_run(
-        run, labels, params=params, include_unreviewed=not args.reviewed_only
+        run, labels, params=params, head=head, include_unreviewed=not args.reviewed_only
     ).model
     return model, inputs
 

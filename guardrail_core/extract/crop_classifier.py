@@ -29,6 +29,7 @@ from guardrail_core.extract.backbone import (
 from guardrail_core.extract.classifier_params import CLASS_NAMES, TRAINING_CLIP, ClassifierParams
 from guardrail_core.extract.cnn_runtime import BATCH_SIZE, CropNetwork, chosen_runtime
 from guardrail_core.extract.segment_head import SegmentHead
+from guardrail_core.extract.shape_features import feature_columns
 from guardrail_core.extract.torch_threads import one_thread
 
 SEGMENT_PREFIX = "segment."  # names of the segment head's arrays in weights.npz
@@ -325,8 +326,15 @@ class GuardrailClassifier:
             )
         segment_weights = {k: v for k, v in weights.items() if k.startswith(SEGMENT_PREFIX)}
         weights = {k: v for k, v in weights.items() if not k.startswith(SEGMENT_PREFIX)}
+        head_features = info.get("segment_head", {}).get("features")
+        try:
+            columns = None if head_features is None else feature_columns(head_features)
+        except ValueError as exc:
+            raise ModelFormatError(f"segment_head.features: {exc}") from exc
         segment_head = (
-            SegmentHead.from_weights(segment_weights, SEGMENT_PREFIX) if segment_weights else None
+            SegmentHead.from_weights(segment_weights, SEGMENT_PREFIX, columns)
+            if segment_weights
+            else None
         )
         for name, array in weights.items():
             if array.dtype.kind not in "fiub":

@@ -36,7 +36,7 @@ from guardrail_core.extract.crop_classifier import (
     GuardrailClassifier,
     weights_digest,
 )
-from guardrail_core.extract.shape_features import SEGMENT_FEATURE_NAMES
+from guardrail_core.extract.shape_features import feature_columns
 from guardrail_core.formats.atomic import staged_folder
 
 __all__ = ["MODEL_FORMAT_VERSION", "MODEL_FILE", "WEIGHTS_FILE", "load_model", "save_model"]
@@ -228,11 +228,15 @@ def load_model(folder: Path) -> GuardrailClassifier:
         raise ModelFormatError(
             f"{folder}: model.json and weights.npz disagree on whether there is a segment head"
         )
-    if has_head and document["segment_head"].get("features") != list(SEGMENT_FEATURE_NAMES):
-        raise IncompatibleModelError(
-            f"{folder}: the segment head was trained on other segment features than this "
-            f"version computes; retrain the model"
-        )
+    if has_head:
+        names = document["segment_head"].get("features")
+        try:
+            feature_columns(names if isinstance(names, list) else [repr(names)])
+        except ValueError as exc:
+            raise IncompatibleModelError(
+                f"{folder}: the segment head was trained on segment features this version "
+                f"does not compute ({exc}); retrain the model"
+            ) from exc
 
     info = {key: value for key, value in document.items() if key != "format_version"}
     try:

@@ -17,6 +17,7 @@ from torch import nn
 
 from guardrail_core.errors import InvalidOptionError, ModelFormatError
 from guardrail_core.extract.classifier_params import TRAINING_CLIP
+from guardrail_core.extract.shape_features import SEGMENT_FEATURE_NAMES, feature_columns
 from guardrail_core.extract.torch_threads import one_thread
 from guardrail_core.params import StageParams, param
 
@@ -42,6 +43,31 @@ class SegmentHeadParams(StageParams):
         doc="the training crops are split into this many folds of whole spatial blocks; each "
         "fold's crop logits come from a crop classifier trained on the other folds",
     )
+    ignored_features: str = param(
+        "",
+        doc="segment features the head does not read, comma-separated (the model lists those "
+        "it reads); 'intensity_mean,intensity_std' for a model meant for scanners whose "
+        "intensity is calibrated otherwise than its training drives'",
+    )
+
+    def check_relations(self) -> None:
+        try:
+            self.columns()
+        except ValueError as exc:
+            self.fail(f"ignored_features: {exc}")
+
+    def feature_names(self) -> tuple[str, ...]:
+        """The segment features the head reads, in :data:`SEGMENT_FEATURE_NAMES` order."""
+        ignored = [name.strip() for name in self.ignored_features.split(",") if name.strip()]
+        feature_columns(ignored)  # every name known
+        return tuple(name for name in SEGMENT_FEATURE_NAMES if name not in ignored)
+
+    def columns(self) -> np.ndarray:
+        """(K,) int64: the columns of the segment features the head reads."""
+        names = self.feature_names()
+        if not names:
+            raise ValueError("every segment feature is ignored")
+        return feature_columns(names)
 
 
 def head_inputs(
@@ -83,11 +109,24 @@ class SegmentHead:
     Attributes
     ----------
     mean, scale : (F + 2,) float32, standardisation of :func:`head_inputs`
+    columns : (F,) int64 or None, the columns of the segment features given to :meth:`proba`
+        and :meth:`proba_range` that the head reads (None: all of them)
     """
 
-    def __init__(self, mean: np.ndarray, scale: np.ndarray, net: nn.Sequential) -> None:
+    def __init__(
+        self,
+        mean: np.ndarray,
+        scale: np.ndarray,
+        net: nn.Sequential,
+        columns: np.ndarray | None = None,
+    ) -> None:
         self.mean = mean
         self.scale = scale
+        self.columns = None if columns is None else np.asarray(columns, np.int64)
+        if self.columns is not None and len(self.columns) != len(mean) - 2:
+            raise ModelFormatError(
+                f"segment head: it takes {len(mean) - 2} features, {len(self.columns)} are named"
+            )
         self._net = net
         net.eval()
         net.requires_grad_(False)
@@ -96,11 +135,22 @@ class SegmentHead:
     def n_inputs(self) -> int:
         return int(len(self.mean))
 
+    def _read(self, features: np.ndarray) -> np.ndarray:
+        features = np.asarray(features, np.float32)
+        if self.columns is None:
+            return features
+        if features.ndim != 2 or features.shape[1] <= self.columns.max(initial=-1):
+            raise InvalidOptionError(
+                f"segment head: expected (S, F) features with the columns it reads, got "
+                f"{features.shape}"
+            )
+        return np.ascontiguousarray(features[:, self.columns])  # a column pick is F-ordered
+
     def proba(
         self, features: np.ndarray, crop_proba: np.ndarray, clip: float = TRAINING_CLIP
     ) -> np.ndarray:
         """(S,) float64 P(guardrail) of segments; see :func:`head_inputs` for the inputs."""
-        x = head_inputs(features, crop_proba, clip)
+        x = head_inputs(self._read(features), crop_proba, clip)
         if x.shape[1] != self.n_inputs:
             raise InvalidOptionError(
                 f"segment head: expected {self.n_inputs - 2} features per segment, got "
@@ -131,7 +181,7 @@ class SegmentHead:
         -------
         lo, hi : (S,) float64 in [0, 1], lo <= :meth:`proba` <= hi for every crop probability
         """
-        x = head_inputs(features, np.full(len(features), 0.5)).astype(np.float64)
+        x = head_inputs(self._read(features), np.full(len(features), 0.5)).astype(np.float64)
         top = max_logit(clip)
         if x.shape[1] != self.n_inputs:
             raise InvalidOptionError(
@@ -173,8 +223,11 @@ class SegmentHead:
         return out
 
     @classmethod
-    def from_weights(cls, weights: dict[str, np.ndarray], prefix: str) -> SegmentHead:
-        """Rebuild from :meth:`weights`; :class:`ModelFormatError` when they do not fit."""
+    def from_weights(
+        cls, weights: dict[str, np.ndarray], prefix: str, columns: np.ndarray | None = None
+    ) -> SegmentHead:
+        """Rebuild from :meth:`weights` (and the ``columns`` it reads);
+        :class:`ModelFormatError` when they do not fit."""
         try:
             mean = np.asarray(weights[f"{prefix}mean"], np.float32)
             scale = np.asarray(weights[f"{prefix}scale"], np.float32)
@@ -198,7 +251,7 @@ class SegmentHead:
             net.load_state_dict(state, strict=True)
         except RuntimeError as exc:
             raise ModelFormatError(f"weights: the segment head does not load: {exc}") from exc
-        return cls(mean, scale, net)
+        return cls(mean, scale, net, columns)
 
 
 def fit_segment_head(
@@ -208,6 +261,7 @@ def fit_segment_head(
     params: SegmentHeadParams = SegmentHeadParams(),
     *,
     seed: int = 0,
+    columns: np.ndarray | None = None,
 ) -> SegmentHead:
     """Train a segment head, full batch, with balanced class weights.
 
@@ -216,7 +270,10 @@ def fit_segment_head(
     features : (S, F) float32 segment features
     crop_proba : (S,) out-of-fold crop P(guardrail), NaN where there is no crop
     labels : (S,) bool, True = guardrail; both classes must occur
+    columns : (K,) int, the feature columns the head reads (None: all F)
     """
+    if columns is not None:
+        features = np.ascontiguousarray(np.asarray(features, np.float32)[:, np.asarray(columns)])
     x = head_inputs(features, crop_proba)
     y = np.asarray(labels, bool)
     counts = np.array([np.count_nonzero(~y), np.count_nonzero(y)], np.float64)
@@ -243,4 +300,4 @@ def fit_segment_head(
             optimiser.zero_grad()
             loss_fn(net(z), target).backward()
             optimiser.step()
-    return SegmentHead(mean.astype(np.float32), scale.astype(np.float32), net)
+    return SegmentHead(mean.astype(np.float32), scale.astype(np.float32), net, columns)

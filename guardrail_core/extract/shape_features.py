@@ -10,6 +10,8 @@ no crop from them alone.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from guardrail_core.extract.correct import CorrectionParams, SegmentExtents, neighbour_pairs
@@ -52,6 +54,24 @@ NEIGHBOUR_FEATURE_NAMES = (
 )
 SEGMENT_FEATURE_NAMES = SHAPE_FEATURE_NAMES + NEIGHBOUR_FEATURE_NAMES
 SEGMENT_FEATURE_DIM = len(SEGMENT_FEATURE_NAMES)
+
+
+def feature_columns(names: Sequence[str]) -> np.ndarray:
+    """(K,) int64: the columns of :data:`SEGMENT_FEATURE_NAMES` that ``names`` are, in order.
+
+    Raises
+    ------
+    ValueError
+        A name is not a segment feature this version computes, or comes twice.
+    """
+    names = list(names)
+    unknown = [name for name in names if name not in SEGMENT_FEATURE_NAMES]
+    if unknown or len(set(names)) != len(names):
+        raise ValueError(
+            f"segment features: unknown {unknown}" if unknown else "segment features: repeated"
+        )
+    return np.array([SEGMENT_FEATURE_NAMES.index(name) for name in names], np.int64)
+
 
 _BIN_M = 0.05  # coverage bins along the road and in height (metres)
 _INTENSITY_SCALE = 65535.0  # LAS intensity is uint16

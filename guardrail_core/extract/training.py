@@ -26,7 +26,6 @@ from guardrail_core.extract.crops import CROP_OK
 from guardrail_core.extract.pipeline import ExtractionParams, extract, segment_crops
 from guardrail_core.extract.segment_head import SegmentHeadParams, fit_segment_head
 from guardrail_core.extract.segment_truth import segment_truth
-from guardrail_core.extract.shape_features import SEGMENT_FEATURE_NAMES
 from guardrail_core.formats.drive import load_drive
 
 # Held-out metrics are measured on whole blocks of this many slices (10 m), so that neighbouring
@@ -274,6 +273,7 @@ def train_on_set(
         progress=progress,
         on_fold=lambda k: report(f"crop classifier of fold {k + 1}/{head.folds}"),
     )
+    columns = head.columns()
     rng = np.random.default_rng(params.seed)
     held = held_out_mask(
         data.labels, data.groups, params.held_out_fraction, rng, draws=params.held_out_draws
@@ -283,7 +283,12 @@ def train_on_set(
     report("segment head: measuring on held-out blocks")
     if held.any():
         measured = fit_segment_head(
-            data.features[~held], crop_proba[~held], data.labels[~held], head, seed=params.seed
+            data.features[~held],
+            crop_proba[~held],
+            data.labels[~held],
+            head,
+            seed=params.seed,
+            columns=columns,
         )
         proba = measured.proba(data.features[held], crop_proba[held])
         # ">=" as the pipeline calls a segment guardrail (process_drive, predict_run).
@@ -299,12 +304,12 @@ def train_on_set(
         )
     report("segment head: training on all segments")
     model.segment_head = fit_segment_head(
-        data.features, crop_proba, data.labels, head, seed=params.seed
+        data.features, crop_proba, data.labels, head, seed=params.seed, columns=columns
     )
     info = model.info
     info["metrics"] = {"held_out": held_out, "held_out_crops": info["metrics"]["held_out"]}
     info["segment_head"] = {
-        "features": list(SEGMENT_FEATURE_NAMES),
+        "features": list(head.feature_names()),
         "params": head.to_json(),
         "folds_without_crop_classifier": missing_folds,
         "seconds": round(time.perf_counter() - clock, 2),
