@@ -7,8 +7,9 @@
 # (range noise, dropouts, intensity gain), as real deliveries are. About 15-20 minutes on 2
 # cores. The model shipped now was made on 2026-11-23 from the same seeds on bare streets (no
 # roadside vegetation, no scanner variation, before the segments' gap cut); this script's model
-# is better on the simulated streets but fails three KITTI checks, so it is not shipped yet
-# (README, "Accuracy on streets nobody tuned for"). Check a model before copying it:
+# is better on the simulated streets but fails KITTI checks (it calls real parked cars' sides
+# guardrail), so it is not shipped yet (README, "Accuracy on streets nobody tuned for"). Check
+# a model before copying it:
 #   .venv/bin/python benchmarks/kitti_vegetation.py --model WORK_DIR/model
 # Usage: sh docs/train_default_model.sh [WORK_DIR]   (run from the repository root)
 set -e
