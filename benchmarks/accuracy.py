@@ -24,7 +24,9 @@ streets:
 - poles found of those in view (scanned: ten of the guardrail's points within 0.1 m of the axis)
   and of all true poles, pipes found of those in view (a guardrail with one unit whose two poles
   were scanned), and the misses of each by cause (:mod:`guardrail_core.evaluate.misses`:
-  beyond the drive's ends, far side, occluded, short run, unit partly seen, design, ...);
+  beyond the drive's ends, far side, occluded, short run, unit partly seen, design, ...); the
+  false poles (detected poles no true pole took: a hedge's stems called guardrail, say), since a
+  pole within 0.3 m of a true one counts as found, and a row of false ones would pass for it;
 - errors of what was found: pole position (median), pipe radius (median), pipe axis deviation
   (mean), beam section Hausdorff (median), all in mm;
 - per design: poles and pipes found.
@@ -234,6 +236,7 @@ def summarise(streets: list[dict]) -> dict:
         "axis_mm": float(np.mean(misses.axis_deviations_mm)) if misses.axis_deviations_mm else None,
         "beam_mm": median(misses.beam_hausdorff_mm),
         "pole_mm": median(misses.pole_errors_mm),
+        "false_poles": misses.false_poles / max(misses.poles_detected, 1),
     }
     met = {
         name: value is not None
@@ -300,6 +303,8 @@ def report(summary: dict, streets: list[dict]) -> str:
         f"  of all true poles: {m.poles_found} of {m.poles_total} "
         f"({100 * f['poles_found_of_all']:.1f} %)",
         f"  missed by cause: {_causes(m.pole_misses)}",
+        f"  false poles (detected where no true pole stands): {m.false_poles} of "
+        f"{m.poles_detected} detected",
         f"pipes found      {m.pipes_found} of {m.pipes_in_view} in view "
         f"({100 * f['pipes_found']:.1f} %)   target >= 95 % {ok[met['pipes_found']]}",
         f"  missed by cause: {_causes(m.pipe_misses)}",

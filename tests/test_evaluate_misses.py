@@ -11,6 +11,7 @@ from guardrail_core.evaluate.detection import evaluate_run_folder
 from guardrail_core.evaluate.misses import MissBreakdown, explain_misses
 from guardrail_core.evaluate.reconstruction import PolePointCounter
 from guardrail_core.formats.drive import Drive
+from guardrail_core.reconstruct.model import Pole, RunModel
 from guardrail_core.reconstruct.run_models import load_run_models
 from guardrail_core.sensors.trajectory import Trajectory
 
@@ -86,6 +87,21 @@ def test_every_missed_pole_and_pipe_gets_its_cause() -> None:
         "pipes_in_view": 0,
         "pipes_found": 0,
     }
+
+
+def test_poles_detected_where_none_stands_are_false_poles() -> None:
+    # Poles within the match distance of a true one are found, one per true pole; a second one
+    # at the same true pole, and the stems of a hedge 1 m behind the rail, are false poles.
+    objects = [guardrail(1, [10, 12, 14], 2.0)]
+    counter = PolePointCounter(objects)
+    counter.counts = [np.array([SCANNED] * 3)]
+    at = [(10.0, 2.0), (12.01, 2.0), (12.1, 2.0)] + [(x, 3.0) for x in (10.5, 10.7, 10.9)]
+    poles = [Pole(np.array([x, y, 0.0]), 0.03, 0.9, 50) for x, y in at]
+    run = RunModel(0, poles, [], None, np.zeros(0, bool), 300, [])
+    misses = explain_misses([run], objects, counter, straight_trajectory())
+    assert (misses.poles_found, misses.poles_detected, misses.false_poles) == (2, 6, 4)
+    assert misses.to_json()["false_poles"] == 4
+    assert (misses + misses).false_poles == 8
 
 
 def test_breakdowns_add_up_over_drives() -> None:

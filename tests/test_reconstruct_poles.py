@@ -161,8 +161,29 @@ def test_a_post_off_the_line_of_the_poles_is_not_one_of_them():
     det = detect_poles(np.vstack([run.xyz, post]), run.ground)
     xy_err, _ = _match(det, run.poles)
     assert xy_err.max() < POSITION_TOL
-    lax = PoleParams(max_offset_deviation_m=1.0)
+    # Off the line test (and with posts allowed 0.9 m apart) it stands as a sixth pole.
+    lax = PoleParams(max_offset_deviation_m=1.0, min_spacing_m=0.5)
     assert len(detect_poles(np.vstack([run.xyz, post]), run.ground, lax).poles) == 6
+
+
+def test_the_stems_of_a_hedge_behind_the_rails_are_not_poles():
+    # A hedge 0.3 m behind the rails that the classifier called guardrail: its stems, every
+    # 0.2 m, fit circles of 6 cm as a pole's front does. Posts stand metres apart, so of two
+    # poles closer than 1 m only the one with more points on its circle is a pole.
+    run = make_run(4, seed=16)
+    rng = np.random.default_rng(16)
+    along = (run.poles[-1] - run.poles[0]) / np.linalg.norm(run.poles[-1] - run.poles[0])
+    stems = [
+        _front_cylinder(rng, run.poles[0] + x * along - 0.3 * run.toward_road,
+                        run.toward_road, 0.06, 0.6, 40)
+        for x in np.arange(0.1, 8.0, 0.2)
+    ]  # fmt: skip
+    xyz = np.vstack([run.xyz, *stems])
+    xy_err, _ = _match(detect_poles(xyz, run.ground), run.poles)
+    assert xy_err.max() < POSITION_TOL
+    # With poles allowed 0.15 m apart the stems stand as poles among the true ones.
+    close = PoleParams(min_spacing_m=0.15)
+    assert len(detect_poles(xyz, run.ground, close).poles) > 2 * len(run.poles)
 
 
 def test_ground_points_on_a_poles_foot_are_not_its_ground():
@@ -256,7 +277,7 @@ def test_an_axis_beside_a_pole_is_that_pole():
     xyz = np.vstack([run.xyz, ends])
     xy_err, _ = _match(detect_poles(xyz, run.ground), run.poles)
     assert xy_err.max() < POSITION_TOL
-    near = PoleParams(merge_distance_m=0.1)
+    near = PoleParams(merge_distance_m=0.1, min_spacing_m=0.1)
     assert len(detect_poles(xyz, run.ground, near).poles) == len(run.poles) + 1
 
 

@@ -69,6 +69,24 @@ def test_one_unit_run():
     assert (split.unit_of_point[:-1] == 0).all() and split.unit_of_point[-1] == -1
 
 
+def test_what_stands_behind_the_poles_belongs_to_no_unit():
+    # A hedge 0.3 m behind the pole plane that the classifier called guardrail is no part of
+    # the units; a post's back (0.04 m behind) and a rail bowing 0.1 m behind are.
+    run = make_run(2, seed=9)
+    poles = _poles(run)
+    frame_normal = -run.toward_road / np.linalg.norm(run.toward_road)  # away from the road
+    middle = (run.poles[0] + run.poles[1]) / 2 + [0.0, 0.0, 0.5]
+    behind = middle + np.outer([0.04, 0.1, 0.3, 0.6], frame_normal)
+    split = split_units(np.concatenate([run.xyz, behind]), order_poles(poles, run.toward_road))
+    assert split.unit_of_point[-4:].tolist() == [0, 0, -1, -1]
+    assert (split.unit_of_point[: len(run.xyz)] >= 0).all()
+    anywhere = UnitParams(max_behind_m=1.0)
+    split = split_units(
+        np.concatenate([run.xyz, behind]), order_poles(poles, run.toward_road), anywhere
+    )
+    assert split.unit_of_point[-4:].tolist() == [0, 0, 0, 0]
+
+
 def test_no_unit_without_two_poles():
     run = make_run(1, seed=6)
     split = split_units(run.xyz, _poles(run)[:1])

@@ -25,6 +25,7 @@ from guardrail_core.reconstruct.pipeline import (
     ReconstructionParams,
     reconstruct_run,
 )
+from guardrail_core.reconstruct.poles import PoleParams
 from guardrail_core.reconstruct.run_models import load_run_models
 from tests.file_tree import file_tree
 from tests.reconstruct_fixtures import make_run
@@ -267,10 +268,17 @@ def test_rails_without_poles_are_not_reconstructed_and_the_inventory_says_why() 
 
 
 def test_two_poles_with_no_room_between_them_give_poles_only() -> None:
-    """Two thick stems 0.18 m apart (a bush beside a rail) detected as poles: no unit to model, and
-    no error that would stop the drive's other runs."""
+    """Two thick stems 0.18 m apart (a bush beside a rail): posts stand metres apart, so one of
+    them is a pole; allowed as two poles, there is no unit between them to model. Either way the
+    run is poles only, with no error that would stop the drive's other runs."""
     synth = make_run(n_units=1, spacing=0.18, pole_radius=0.085, seed=8, rail_points_per_m=400)
     run, superimposed = _reconstruct(synth)
+    assert len(run.poles) == 1 and run.model is None and superimposed is None
+    assert any("a unit needs two" in note for note in run.notes)
+    [row] = inventory_rows([run], np.zeros(3))
+    assert row["status"] == "poles only"
+    close = ReconstructionParams(poles=PoleParams(min_spacing_m=0.1))
+    run, superimposed = _reconstruct(synth, params=close)
     assert len(run.poles) == 2 and run.model is None and superimposed is None
     assert any("no room for a unit" in note for note in run.notes)
     [row] = inventory_rows([run], np.zeros(3))

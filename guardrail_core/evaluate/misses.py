@@ -114,6 +114,8 @@ class MissBreakdown:
     poles_total, poles_found : true poles, and those a detected pole matched
     poles_in_view, poles_found_in_view : the true poles that were scanned (``pole_points`` of
         their guardrail's points within ``pole_reach_m`` of the axis), and those of them found
+    poles_detected : the runs' poles (those inserted where one was missing included); those no
+        true pole took (:attr:`false_poles`) stand where there is none, or twice at one
     pole_misses : cause (:data:`POLE_CAUSES`) -> missed poles
     pipes_in_view, pipes_found : pipes of the design per unit of the guardrails in view, and
         those found (the rules of :mod:`guardrail_core.evaluate.reconstruction`)
@@ -129,6 +131,7 @@ class MissBreakdown:
     poles_found: int = 0
     poles_in_view: int = 0
     poles_found_in_view: int = 0
+    poles_detected: int = 0
     pole_misses: dict[str, int] = field(default_factory=dict)
     pipes_in_view: int = 0
     pipes_found: int = 0
@@ -152,6 +155,7 @@ class MissBreakdown:
             poles_found=self.poles_found + other.poles_found,
             poles_in_view=self.poles_in_view + other.poles_in_view,
             poles_found_in_view=self.poles_found_in_view + other.poles_found_in_view,
+            poles_detected=self.poles_detected + other.poles_detected,
             pole_misses=_add(self.pole_misses, other.pole_misses),
             pipes_in_view=self.pipes_in_view + other.pipes_in_view,
             pipes_found=self.pipes_found + other.pipes_found,
@@ -164,12 +168,19 @@ class MissBreakdown:
             beam_hausdorff_mm=self.beam_hausdorff_mm + other.beam_hausdorff_mm,
         )
 
+    @property
+    def false_poles(self) -> int:
+        """Detected poles that matched no true pole (a pole is matched once)."""
+        return self.poles_detected - self.poles_found
+
     def to_json(self) -> dict[str, Any]:
         return {
             "poles_total": self.poles_total,
             "poles_found": self.poles_found,
             "poles_in_view": self.poles_in_view,
             "poles_found_in_view": self.poles_found_in_view,
+            "poles_detected": self.poles_detected,
+            "false_poles": self.false_poles,
             "pole_misses": self.pole_misses,
             "pipes_in_view": self.pipes_in_view,
             "pipes_found": self.pipes_found,
@@ -290,6 +301,7 @@ def explain_misses(
         poles_found=len(found),
         poles_in_view=in_view,
         poles_found_in_view=found_in_view,
+        poles_detected=sum(len(run.poles) for run in runs),
         pole_misses={c: pole_misses[c] for c in POLE_CAUSES if pole_misses[c]},
         pipes_in_view=evaluation.overall.pipes_in_view,
         pipes_found=evaluation.overall.pipes_found,

@@ -156,13 +156,12 @@ def detect_poles(
     measured = _measure(xyz, section, ground, tree, found, params)
     if params.shared_radius and measured.accept.any():
         # Poles of one run share a design: every stack is fitted again with the radius that
-        # fits the accepted poles on the run's line together (a delineator off it is another
-        # design), fitting only the axis (a free radius on a half-seen pole trades off against
-        # the axis' offset from the road, and can take in a rail).
-        accept = measured.accept
-        on_pole = measured.on_accepted(accept)
-        inline = accept & _consistent_offsets(xyz[:, :2], on_pole, measured.centre, accept, params)
-        use = inline if inline.any() else accept
+        # fits the run's posts together (a delineator off their line is another design, a
+        # hedge's stems between them no post), fitting only the axis (a free radius on a
+        # half-seen pole trades off against the axis' offset from the road, and can take in
+        # a rail).
+        posts = _posts(xyz, measured, found, params)
+        use = posts if posts.any() else measured.accept
         shared = fit_shared_radius(
             xyz, [(found[k].centre, found[k].members) for k in np.flatnonzero(use)], params
         )
@@ -170,10 +169,8 @@ def detect_poles(
         if not found:
             return none
         measured = _measure(xyz, section, ground, tree, found, params)
-    centre, accept = measured.centre, measured.accept
-    accept = accept & _consistent_offsets(
-        xyz[:, :2], measured.on_accepted(accept), centre, accept, params
-    )
+    centre = measured.centre
+    accept = _posts(xyz, measured, found, params)
     is_pole = measured.on_accepted(accept)
     n_member = np.bincount(measured.member_pole[is_pole], minlength=len(centre))
     poles = [
@@ -283,8 +280,30 @@ def _measure(
     )
     # Two accepted axes closer than merge_distance_m are one pole: the one with more inlier
     # points stays.
-    accept &= _suppress_duplicates(centre, np.array([len(f.members) for f in fits]), accept, params)
+    inliers = np.array([len(f.members) for f in fits])
+    accept &= _suppress_close(centre, inliers, accept, params.merge_distance_m)
     return MeasuredAxes(centre, radius, ground_z, height, accept, member_pole)
+
+
+def _posts(
+    xyz: np.ndarray, measured: MeasuredAxes, fits: list[AxisFit], params: PoleParams
+) -> np.ndarray:
+    """(P,) bool: the accepted axes that are the run's posts.
+
+    Posts stand metres apart, so of two accepted axes closer than ``min_spacing_m`` (a hedge's
+    stems behind the rails, some 0.2 m apart, fit a post's circle too) the one with more
+    points on its circle stays. The axes left so give the run's line (a hedge's stems, many
+    more than the posts, would otherwise make it theirs), and every accepted axis off that
+    line is left out (:func:`_consistent_offsets`) before the spacing is applied to the rest.
+    """
+    accept = measured.accept
+    inliers = np.array([len(f.members) for f in fits])
+    spaced = accept & _suppress_close(measured.centre, inliers, accept, params.min_spacing_m)
+    on_pole = measured.on_accepted(accept)
+    on_line = accept & _consistent_offsets(
+        xyz[:, :2], on_pole, measured.centre, accept, params, reference=spaced
+    )
+    return on_line & _suppress_close(measured.centre, inliers, on_line, params.min_spacing_m)
 
 
 def _nearest_axis(
@@ -301,29 +320,37 @@ def _nearest_axis(
     return np.where(inside, i, -1), d
 
 
-def _suppress_duplicates(
-    centre: np.ndarray, n_points: np.ndarray, accept: np.ndarray, params: PoleParams
+def _suppress_close(
+    centre: np.ndarray, n_points: np.ndarray, accept: np.ndarray, distance_m: float
 ) -> np.ndarray:
-    """(P,) bool: False for an accepted axis within merge_distance_m of a stronger one."""
+    """(P,) bool: False for an accepted axis within ``distance_m`` of one with more points
+    (``n_points`` (P,)); of axes equally strong, the first stays."""
     keep = np.ones(len(centre), bool)
     idx = np.flatnonzero(accept)
-    pairs = cKDTree(centre[idx]).query_pairs(params.merge_distance_m, output_type="ndarray")
-    for a, b in pairs:  # per pair of duplicate poles (rare)
+    pairs = cKDTree(centre[idx]).query_pairs(distance_m, output_type="ndarray")
+    for a, b in pairs:  # per pair of axes too close (a few; dozens in a hedge)
         weaker = idx[a] if n_points[idx[a]] < n_points[idx[b]] else idx[b]
         keep[weaker] = False
     return keep
 
 
 def _consistent_offsets(
-    xy: np.ndarray, is_pole: np.ndarray, centre: np.ndarray, accept: np.ndarray, params: PoleParams
+    xy: np.ndarray,
+    is_pole: np.ndarray,
+    centre: np.ndarray,
+    accept: np.ndarray,
+    params: PoleParams,
+    reference: np.ndarray | None = None,
 ) -> np.ndarray:
-    """(P,) bool: False for an accepted axis that stands off the line of the run's other poles.
+    """(P,) bool: False for an accepted axis that stands off the line of the run's poles.
 
     Each pole's offset is the median signed distance of the rail points (not pole points)
     within ``offset_window_m`` of its axis from the axis, across their principal direction
-    (oriented along the run's, so the sign means the same side for every pole). With fewer
-    than ``offset_min_poles`` accepted poles, or fewer than ``offset_min_points`` rail points
-    near a pole, nothing is rejected.
+    (oriented along the run's, so the sign means the same side for every pole). The line is
+    the median offset of the ``reference`` poles (P,) bool (default: the accepted ones). With
+    fewer than ``offset_min_poles`` of them, or fewer than ``offset_min_points`` rail points
+    near a pole, nothing is rejected; nor when most of them stand off their own median: the
+    offsets then say no line, and rejecting every pole off the median would reject them all.
     """
     keep = np.ones(len(centre), bool)
     idx = np.flatnonzero(accept)
@@ -335,7 +362,7 @@ def _consistent_offsets(
     run_dir = vt[0]
     tree = cKDTree(rails)
     offset = np.full(len(idx), np.nan)
-    for j, k in enumerate(idx):  # per pole (a few per run)
+    for j, k in enumerate(idx):  # per pole (a few per run; dozens where a hedge stands)
         near = rails[tree.query_ball_point(centre[k], params.offset_window_m)]
         if len(near) < params.offset_min_points:
             continue
@@ -344,10 +371,13 @@ def _consistent_offsets(
         across = np.array([-along[1], along[0]])
         offset[j] = float(np.median((near - centre[k]) @ across))
     known = np.isfinite(offset)
-    if known.sum() < params.offset_min_poles:
+    line = known & (accept if reference is None else reference)[idx]
+    if line.sum() < params.offset_min_poles:
         return keep
-    deviation = np.abs(offset - np.median(offset[known]))
-    keep[idx[known & (deviation > params.max_offset_deviation_m)]] = False
+    line_offset = np.median(offset[line])
+    if 2 * (np.abs(offset[line] - line_offset) > params.max_offset_deviation_m).sum() >= line.sum():
+        return keep
+    keep[idx[known & (np.abs(offset - line_offset) > params.max_offset_deviation_m)]] = False
     return keep
 
 

@@ -177,6 +177,17 @@ class PoleParams(StageParams):
         "from its axis and reaching the ground through a stray ground point, fit a pole's "
         "circle too.",
     )
+    min_spacing_m: float = param(
+        1.0,
+        unit="m",
+        ge=0,
+        le=4.0,
+        doc="A guardrail's posts stand 2 m or 4 m apart (real railings 1.5 m and more): of two "
+        "accepted axes closer than this, the one with fewer points on its circle is no post, "
+        "and the axes left so give the run's line (``max_offset_deviation_m``). The stems of "
+        "a hedge behind the rails that the classifier called guardrail, some 0.2 m apart, fit "
+        "a pole's circle too.",
+    )
     shared_radius: bool = param(
         True,
         doc="Poles of one run share a design: after a first pass, every pole is refitted with the "
@@ -239,8 +250,9 @@ class PoleParams(StageParams):
         le=10.0,
         doc="The poles of a run stand at one offset from its rails (one design): with at least "
         "``offset_min_poles`` poles, one whose offset from the rail points near it differs "
-        "from the poles' median offset by more than this is not one of them (a delineator "
-        "post before a beam).",
+        "from the median offset of the poles ``min_spacing_m`` apart by more than this is not "
+        "one of them (a delineator post before a beam), as long as most of those lie within "
+        "this of their median; with no such majority no pole is rejected.",
     )
     offset_window_m: float = param(
         1.5,
