@@ -85,7 +85,12 @@ def points_f1(truth: np.ndarray, predicted: np.ndarray, n_points: np.ndarray) ->
 
 
 def learning_curve(
-    run_dir: Path, truth: np.ndarray, labels: list[int], order: str, seed: int
+    run_dir: Path,
+    truth: np.ndarray,
+    labels: list[int],
+    order: str,
+    seed: int,
+    reviewed_weight: float | None = None,
 ) -> dict:
     """Label, fine-tune and measure ``run_dir`` (modified in place) at each count of ``labels``."""
     rng = np.random.default_rng(seed)
@@ -112,7 +117,12 @@ def learning_curve(
             reviewed[batch] = True
             in_batch = np.isin(run.point_segment, batch)
             point_labels[in_batch] = truth[run.point_segment[in_batch]]
-            trained = train_from_run(run, point_labels, params=ClassifierParams(mode="fast"))
+            trained = train_from_run(
+                run,
+                point_labels,
+                params=ClassifierParams(mode="fast"),
+                reviewed_weight=reviewed_weight,
+            )
             write_predictions(run_dir, predict_run(run, trained.model), trained.model)
             run = load_run(run_dir)
         rest = ~reviewed
@@ -138,6 +148,12 @@ def main() -> int:
     parser.add_argument("--order", choices=("queue", "random", "both"), default="both")
     parser.add_argument("--seed", type=int, default=0, help="the random order's seed")
     parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument(
+        "--reviewed-weight",
+        type=float,
+        help="how many times an operator's label counts against the model's own in training "
+        "(default: the app's, the reviewed segments together as much as the others)",
+    )
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     labels = sorted({int(x) for x in args.labels.split(",")})
@@ -160,7 +176,7 @@ def main() -> int:
             copy = Path(tmp) / f"run_{order}"
             shutil.copytree(run, copy)
             print(f"labelling in {order} order ...", file=sys.stderr, flush=True)
-            out[order] = learning_curve(copy, truth, labels, order, args.seed)
+            out[order] = learning_curve(copy, truth, labels, order, args.seed, args.reviewed_weight)
     if args.json:
         print(json.dumps(out, indent=1))
     else:

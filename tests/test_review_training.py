@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from guardrail_core.errors import InvalidOptionError, TrainingDataError
+from guardrail_core.extract import training as training_module
 from guardrail_core.extract.classify import EMBEDDING_DIM, ClassifierParams, held_out_mask
 from guardrail_core.extract.crops import CROP_OK
 from guardrail_core.extract.model_folder import load_model
@@ -238,6 +239,37 @@ def test_train_from_run_compares_on_the_same_held_out_segments(run_path: Path) -
     fractions = [f for f, _ in reports]
     assert fractions == sorted(fractions) and fractions[0] == 0.0 and fractions[-1] == 1.0
     assert any("fold" in m for _, m in reports)
+
+
+def test_the_operators_labels_outweigh_the_models_own(
+    run_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # Six segments labelled by operators among some thousand the run's model labelled itself:
+    # by default the six weigh as much as the rest together in the segment head's loss
+    # (test_segment_head: weighted labels outvote many others); counted once, they drown.
+    run = load_run(run_path)
+    labels, flipped = _flip_some(run)
+    weights: list[np.ndarray | None] = []
+    fit = training_module.fit_segment_head
+
+    def spy(*args, sample_weight=None, **kwargs):
+        weights.append(sample_weight)
+        return fit(*args, sample_weight=sample_weight, **kwargs)
+
+    monkeypatch.setattr(training_module, "fit_segment_head", spy)
+    default = train_from_run(run, labels).model
+    expected = (len(run) - len(flipped)) / len(flipped)
+    assert default.info["trained_on"]["reviewed_weight"] == pytest.approx(expected, abs=1e-3)
+    final = weights[-1]  # the head refit on every segment
+    assert final is not None and final.shape == (len(run),)
+    np.testing.assert_allclose(final[flipped], expected, rtol=1e-6)
+    assert np.all(np.delete(final, flipped) == 1.0)
+    weights.clear()
+    once = train_from_run(run, labels, reviewed_weight=1.0).model
+    assert once.info["trained_on"]["reviewed_weight"] == 1.0 and weights == [None, None]
+    for bad in (0.5, float("inf"), True, "10"):
+        with pytest.raises(InvalidOptionError, match="reviewed_weight"):
+            train_from_run(run, labels, reviewed_weight=bad)  # type: ignore[arg-type]
 
 
 def test_train_from_run_compares_against_the_operators_labels(run_path: Path) -> None:

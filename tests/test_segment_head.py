@@ -122,6 +122,30 @@ def test_a_head_reads_only_its_columns() -> None:
         head.proba(wide[:, :3], crop)
 
 
+def test_weighted_labels_outvote_many_others() -> None:
+    # A cluster the current model called guardrail 500 times, and 20 operators' labels in it
+    # saying other: counted once each they are outvoted, counted 50 times they decide.
+    rng = np.random.default_rng(7)
+    centres = np.repeat([[-2.0, 0.0, 0.0], [2.0, 0.0, 0.0], [0.0, 3.0, 0.0]], [800, 800, 520], 0)
+    features = (centres + rng.normal(scale=0.3, size=centres.shape)).astype(np.float32)
+    labels = np.repeat([False, True, True], [800, 800, 520])
+    labels[-20:] = False  # the operators' labels
+    crop = np.full(len(labels), np.nan)
+    probe = np.array([[0.0, 3.0, 0.0]], np.float32)
+    once = fit_segment_head(features, crop, labels, QUICK)
+    weights = np.ones(len(labels), np.float32)
+    weights[-20:] = 50.0
+    heavy = fit_segment_head(features, crop, labels, QUICK, sample_weight=weights)
+    assert once.proba(probe, np.array([np.nan]))[0] > 0.5
+    assert heavy.proba(probe, np.array([np.nan]))[0] < 0.5
+    # Weights of one are the unweighted loss.
+    ones = fit_segment_head(features, crop, labels, QUICK, sample_weight=np.ones(len(labels)))
+    np.testing.assert_allclose(ones.proba(features, crop), once.proba(features, crop), atol=1e-4)
+    for bad in (np.ones(3), np.zeros(len(labels)), np.full(len(labels), np.nan)):
+        with pytest.raises(InvalidOptionError, match="sample weights"):
+            fit_segment_head(features, crop, labels, QUICK, sample_weight=bad)
+
+
 def test_the_proba_range_holds_every_crop_probability_and_is_reached() -> None:
     rng = np.random.default_rng(2)
     head = fit_segment_head(*synthetic(2000, rng), QUICK)

@@ -9,6 +9,7 @@ that never saw that crop), so it learns how far to trust the crop classifier on 
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -262,6 +263,7 @@ def fit_segment_head(
     *,
     seed: int = 0,
     columns: np.ndarray | None = None,
+    sample_weight: np.ndarray | None = None,
 ) -> SegmentHead:
     """Train a segment head, full batch, with balanced class weights.
 
@@ -271,6 +273,9 @@ def fit_segment_head(
     crop_proba : (S,) out-of-fold crop P(guardrail), NaN where there is no crop
     labels : (S,) bool, True = guardrail; both classes must occur
     columns : (K,) int, the feature columns the head reads (None: all F)
+    sample_weight : (S,) float > 0, how much each segment's label counts (None: all alike); the
+        classes stay balanced by count, and each segment's loss is weighted by its class
+        weight times this
     """
     if columns is not None:
         features = np.ascontiguousarray(np.asarray(features, np.float32)[:, np.asarray(columns)])
@@ -282,16 +287,35 @@ def fit_segment_head(
             f"segment head: expected labels of both classes for {len(x)} segments, got "
             f"{int(counts[1])} guardrail and {int(counts[0])} other"
         )
+    if sample_weight is not None:
+        sample_weight = np.asarray(sample_weight, np.float32)
+        if sample_weight.shape != y.shape or not (
+            np.isfinite(sample_weight).all() and (sample_weight > 0).all()
+        ):
+            raise InvalidOptionError(
+                f"segment head: expected {len(y)} positive finite sample weights, got "
+                f"{sample_weight.shape}"
+            )
     mean = x.mean(axis=0)
     scale = np.maximum(x.std(axis=0), np.float32(1e-6))
     z = torch.from_numpy((x - mean) / scale)
     target = torch.from_numpy(y.astype(np.int64))
+    class_weight = torch.tensor(len(y) / (2 * counts), dtype=torch.float32)
     with torch.random.fork_rng(devices=[]), one_thread():
         torch.manual_seed(seed)
         net = _network(x.shape[1], params.hidden_units)
-        loss_fn = nn.CrossEntropyLoss(
-            weight=torch.tensor(len(y) / (2 * counts), dtype=torch.float32)
-        )
+        loss_fn: Callable[[torch.Tensor, torch.Tensor], torch.Tensor]
+        if sample_weight is None:
+            loss_fn = nn.CrossEntropyLoss(weight=class_weight)
+        else:
+            # CrossEntropyLoss's weighted mean, each term also weighted by its segment.
+            w = class_weight[target] * torch.from_numpy(sample_weight)
+            each = nn.CrossEntropyLoss(reduction="none")
+
+            def weighted(logits: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+                return (each(logits, target) * w).sum() / w.sum()
+
+            loss_fn = weighted
         optimiser = torch.optim.AdamW(
             net.parameters(), lr=params.lr, weight_decay=params.weight_decay
         )

@@ -49,6 +49,9 @@ class TrainingSet:
     embeddings : (K, 1280) float32 or None, frozen-backbone embeddings of the same K crops
         (:func:`~guardrail_core.extract.backbone.embed_crops`); fast mode uses them instead of
         embedding the crops
+    weights : (S,) float32 or None, how much each segment's label counts in the segment head's
+        loss (None: all alike); a run's segments that operators labelled weigh more than those
+        the model labelled itself (:func:`~guardrail_core.review.training.train_from_run`)
     """
 
     features: np.ndarray
@@ -58,6 +61,7 @@ class TrainingSet:
     crops: np.ndarray | None
     sources: list[dict[str, Any]]
     embeddings: np.ndarray | None = None
+    weights: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -191,7 +195,7 @@ def train_on_set(
     3. The segment head on every segment, from its features and its out-of-fold crop
        probability; measured first on held-out blocks (``info["metrics"]["held_out"]``, every
        segment, with or without a crop, called guardrail at ``proba >= threshold`` like the
-       pipeline), then refit on all.
+       pipeline), then refit on all; each segment's label counts ``data.weights`` times.
 
     Parameters
     ----------
@@ -289,6 +293,7 @@ def train_on_set(
             head,
             seed=params.seed,
             columns=columns,
+            sample_weight=None if data.weights is None else data.weights[~held],
         )
         proba = measured.proba(data.features[held], crop_proba[held])
         # ">=" as the pipeline calls a segment guardrail (process_drive, predict_run).
@@ -304,7 +309,13 @@ def train_on_set(
         )
     report("segment head: training on all segments")
     model.segment_head = fit_segment_head(
-        data.features, crop_proba, data.labels, head, seed=params.seed, columns=columns
+        data.features,
+        crop_proba,
+        data.labels,
+        head,
+        seed=params.seed,
+        columns=columns,
+        sample_weight=data.weights,
     )
     info = model.info
     info["metrics"] = {"held_out": held_out, "held_out_crops": info["metrics"]["held_out"]}

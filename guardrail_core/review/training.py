@@ -244,6 +244,18 @@ class ReviewTraining:
     seconds: float
 
 
+def _reviewed_weight(reviewed: np.ndarray, reviewed_weight: float | None) -> float:
+    """How many times each reviewed segment (``reviewed`` (S,) bool) counts in the segment
+    head's loss against one the model labelled (see :func:`train_from_run`): 1 where none or
+    all were reviewed."""
+    n_reviewed = int(np.count_nonzero(reviewed))
+    if n_reviewed in (0, len(reviewed)):
+        return 1.0
+    if reviewed_weight is None:
+        return max(1.0, (len(reviewed) - n_reviewed) / n_reviewed)
+    return float(reviewed_weight)
+
+
 def train_from_run(
     run: Run,
     point_labels: np.ndarray | None = None,
@@ -255,6 +267,7 @@ def train_from_run(
     min_reviewed_held_out: int = 20,
     progress_fn: Callable[[float, str], None] | None = None,
     drive_root: str | Path | None = None,
+    reviewed_weight: float | None = None,
 ) -> ReviewTraining:
     """Train a new model on a run's segments, labelled by the operators where they reviewed.
 
@@ -273,6 +286,11 @@ def train_from_run(
         segment against the effective labels (see :class:`ReviewTraining`)
     progress_fn : ``progress_fn(fraction 0..1, message)`` at each step
     drive_root : the drive folder the crops are cut from; None: ``run.json``'s drive path
+    reviewed_weight : how many times an operator's label counts against a label the model gave
+        itself, in the segment head's loss (the crop classifier counts every label once); None:
+        the reviewed segments together weigh as much as the others (and each at least once).
+        Counted once, a hundred labels drown in the thousands the current model gave itself,
+        and the new model learns the old one's mistakes again
 
     Returns
     -------
@@ -299,6 +317,14 @@ def train_from_run(
         raise InvalidOptionError(
             f"min_reviewed_held_out: expected a whole number >= 1, got {min_reviewed_held_out!r}"
         )
+    if reviewed_weight is not None and not (
+        isinstance(reviewed_weight, int | float)
+        and not isinstance(reviewed_weight, bool)
+        and 1 <= reviewed_weight < float("inf")
+    ):
+        raise InvalidOptionError(
+            f"reviewed_weight: expected a number >= 1 or None, got {reviewed_weight!r}"
+        )
     clock = time.perf_counter()
     if progress_fn is not None:
         progress_fn(0.0, "reading the run")
@@ -314,6 +340,9 @@ def train_from_run(
     reviewed_all = effective_labels(run, operator_label=operator_label)[1]
     rows = np.arange(len(run)) if include_unreviewed else np.flatnonzero(reviewed_all)
     reviewed = reviewed_all[rows]
+    weight = _reviewed_weight(reviewed, reviewed_weight)
+    if weight != 1.0:
+        data = dataclasses.replace(data, weights=np.where(reviewed, weight, 1.0).astype(np.float32))
     n_reviewed = data.sources[0]["reviewed"]
     n_guardrail = int(data.labels.sum())
     if not include_unreviewed and n_reviewed == 0:
@@ -335,6 +364,7 @@ def train_from_run(
         "runs": data.sources,
         "run_model": run.info.model.version,
         "reviewed_segments": n_reviewed,
+        "reviewed_weight": round(weight, 3),
     }
     trained = train_on_set(
         data, params=params, head=head, progress_fn=progress_fn, trained_on=trained_on
