@@ -9,6 +9,7 @@ from guardrail_core.errors import ReconstructionError
 from guardrail_core.params import ParameterError
 from guardrail_core.reconstruct.pipes import PipeParams, reconstruct_pipes
 from guardrail_core.reconstruct.pipes.crossings import uncross
+from guardrail_core.reconstruct.pipes.measure import radius_and_axis
 from guardrail_core.reconstruct.pipes.slices import slice_labels
 from guardrail_core.reconstruct.pipes.tracking import Centre, Track
 
@@ -84,6 +85,49 @@ def test_rails_reach_the_poles_and_verticals_the_rails(fence):
             assert p.axis[-1, 0] == pytest.approx(LENGTH, abs=1e-6)
         if p.kind == "vertical":
             assert sorted(p.axis[[0, -1], 1]) == pytest.approx([0.3, 0.8], abs=0.006)
+
+
+def _looked_down_on(rng, r, angle, n, axis_y, noise=0.0015):
+    """(n, 3) points of a horizontal pipe of radius ``r`` along x at height ``axis_y``, seen by
+    a scanner looking down on it at ``angle`` (radians): rays uniform across their direction."""
+    t = rng.uniform(-1.0, 1.0, n)
+    phase = np.arcsin(t) + angle  # 0: the point facing the road (+z), pi/2: the top
+    x = rng.uniform(0.0, LENGTH, n)
+    y = axis_y + r * np.sin(phase)
+    z = r * np.cos(phase)
+    return np.column_stack([x, y, z]) + rng.normal(0, noise, (n, 3))
+
+
+@pytest.mark.parametrize("degrees", [0, 20, 35, 50])
+def test_a_pipe_looked_down_on_keeps_its_radius_and_axis(degrees):
+    # Looked down on, a rail hides its lower edge: the offsets' central share spans less than
+    # 2 s r, and their median stands above its middle; the two give the angle, r and the axis
+    # (1.5 mm of noise blurs the skew and leaves the axis a little high at steep angles).
+    rng = np.random.default_rng(degrees)
+    r, angle = 0.0243, np.radians(degrees)
+    off = _looked_down_on(rng, r, angle, 4000, 0.0, noise=0.0)[:, 1]
+    radius, axis = radius_and_axis(off, PipeParams().radius_share)
+    assert abs(radius - r) < 0.001 and abs(axis) < 0.001
+    # Through the whole reconstruction, with 1.5 mm noise: a rail 0.2 m up, two 0.8 m up.
+    pts = np.vstack(
+        [
+            _looked_down_on(rng, r, angle, 3000, 0.8),
+            _looked_down_on(rng, 0.017, angle, 3000, 0.2),
+            _pole_points(rng, 0.0),
+            _pole_points(rng, LENGTH),
+        ]
+    )
+    result = reconstruct_pipes(pts, LENGTH, POLE_R, rng=0)
+    assert len(result.pipes) == 2
+    for pipe, (y, true_r) in zip(
+        sorted(result.pipes, key=lambda q: -q.axis[0, 1]), [(0.8, r), (0.2, 0.017)], strict=True
+    ):
+        assert pipe.kind == "horizontal"
+        assert abs(pipe.radius - true_r) < 0.0015
+        assert np.abs(pipe.axis[:, 1] - y).max() < 0.003
+    if degrees >= 35:  # the span alone: thin and high by more than the bounds above
+        lo, hi = np.quantile(off, [0.03, 0.97])
+        assert r - 0.5 * (hi - lo) / 0.94 > 0.003 and 0.5 * (lo + hi) > 0.004
 
 
 def test_histogram_has_peaks_above_threshold_at_the_verticals(fence):

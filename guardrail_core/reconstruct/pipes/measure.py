@@ -1,23 +1,29 @@
 """The radius and the axis of each pipe measured from its points (§4.3).
 
-The scanner sees the +z face. Rays sample a pipe about uniformly in the offset across it, so the
-signed in-plane offsets of its points from the axis are close to uniform on [-r, r] (slightly
-squeezed on the far side when the scanner looks down on the pipe). The central ``radius_share``
-of the offsets then spans about ``2 * radius_share * r``: the radius is that half-width divided
-by the share, and the axis is the midpoint of the two quantiles (not the mean, which the
-look-down angle biases toward the scanner by a few mm). A point at offset ``o`` lies
+The scanner sees the +z face. Rays sample a pipe about uniformly across their own direction,
+so a pipe seen square on has its points' signed in-plane offsets from the axis about uniform on
+[-r, r]: the central ``radius_share`` of them spans ``2 * radius_share * r``. A pipe the scanner
+looks down on at an angle ``a`` (a rail 0.2 m above the ground, 2 m from a scanner 2 m up: 45
+degrees) shows its upper side and hides its lower edge: a ray at ``t`` on [-r, r] meets it at
+the offset ``r sin(asin(t / r) + a)``, so the offsets reach only about ``-r cos a`` below the
+axis and crowd toward ``+r``. Where the median stands between the bounds of the central share
+depends on ``a`` alone, which gives the angle; the bounds' span, divided by that of a pipe of
+radius 1 seen at that angle, gives the radius, and the lower bound the axis. Square on this is
+the half-width over the share and the midpoint, as before; taking the span alone made rails
+looked down on 3-5 mm thin and set their axis up to 5 mm high. A point at offset ``o`` lies
 ``sqrt(r**2 - o**2)`` in front of the axis, which gives the axis depth z.
 """
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from guardrail_core.reconstruct.pipes.params import PipeParams
-from guardrail_core.reconstruct.pipes.polylines import central_quantiles, left_normals, resample
+from guardrail_core.reconstruct.pipes.polylines import left_normals, resample
 from guardrail_core.reconstruct.pipes.skeleton import Skeleton
 
 
@@ -44,9 +50,9 @@ def measure_pipes(pts: np.ndarray, skels: list[Skeleton], p: PipeParams) -> list
 
     A pipe's points are those of ``pts`` (N, 3), unit coordinates, metres, within
     ``r + assign_margin_m`` of its skeleton and not within ``r + assign_margin_m`` of another's
-    (junctions and crossings count for neither). The central ``radius_share`` of their signed
-    offsets gives the radius (half-width / share) and the axis (the midpoint: the skeleton is
-    moved across by it), per stretch along the pipe and the median over the stretches,
+    (junctions and crossings count for neither). Their signed offsets give the radius and the
+    axis (:func:`radius_and_axis`; the skeleton is moved across onto the axis), per stretch
+    along the pipe and the median over the stretches,
     ``measure_passes`` times; each point then gives the axis depth ``z - sqrt(r**2 - o**2)``,
     and the median of these is taken.
 
@@ -131,23 +137,60 @@ def _dense(xy: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _width_and_centre(off: np.ndarray, station: np.ndarray, p: PipeParams) -> tuple[float, float]:
-    """Half-width (the radius) and centre (metres) of a pipe's signed offsets ``off`` (M,) at
-    ``station`` (M,) along it: the central ``radius_share`` of each ``measure_stretch_m``,
-    medians over the stretches (all the offsets at once where fewer than
-    ``measure_min_stretches`` stretches hold ``measure_stretch_points``)."""
+    """Radius and axis (metres) of a pipe from its signed offsets ``off`` (M,) at ``station``
+    (M,) along it: :func:`radius_and_axis` of each ``measure_stretch_m``, medians over the
+    stretches (all the offsets at once where fewer than ``measure_min_stretches`` stretches
+    hold ``measure_stretch_points``)."""
     stretch = np.floor(station / p.measure_stretch_m).astype(np.int64)
     order = np.argsort(stretch, kind="stable")
     cuts = np.flatnonzero(np.diff(stretch[order])) + 1
     widths, centres = [], []
     for group in np.split(order, cuts):  # per stretch (~20 per pipe)
         if len(group) >= p.measure_stretch_points:
-            lo, hi = central_quantiles(off[group], p.radius_share)
-            widths.append(0.5 * (hi - lo) / p.radius_share)
-            centres.append(0.5 * (lo + hi))
+            width, centre = radius_and_axis(off[group], p.radius_share)
+            widths.append(width)
+            centres.append(centre)
     if len(widths) < p.measure_min_stretches:
-        lo, hi = central_quantiles(off, p.radius_share)
-        return 0.5 * (hi - lo) / p.radius_share, 0.5 * (lo + hi)
+        return radius_and_axis(off, p.radius_share)
     return float(np.median(widths)), float(np.median(centres))
+
+
+def radius_and_axis(off: np.ndarray, share: float) -> tuple[float, float]:
+    """Radius and axis (metres) of a pipe from its points' signed offsets ``off`` (M,) across
+    it, seen square on or looked down on at up to :data:`MAX_LOOK_DOWN_DEG` (the module's
+    notes): where the median stands between the bounds of the central ``share`` tells the
+    angle, and the span of those bounds then the radius."""
+    lo, median, hi = np.quantile(off, [(1.0 - share) / 2.0, 0.5, (1.0 + share) / 2.0])
+    if hi <= lo:
+        return 0.0, float(median)
+    sign = 1.0
+    if median - lo < hi - median:  # the visible side lies toward -offset: measure it mirrored
+        sign, lo, median, hi = -1.0, -hi, -median, -lo
+    rho, span, low = _look_down_table(share)
+    at = (median - lo) / (hi - lo)
+    r = (hi - lo) / np.interp(at, rho, span)
+    return float(r), float(sign * (lo - r * np.interp(at, rho, low)))
+
+
+#: Look-down angles beyond this (degrees) are taken as this one: beyond some 70 degrees where
+#: the median stands no longer tells the angle (the crowded top folds back over itself).
+MAX_LOOK_DOWN_DEG = 65.0
+
+
+@functools.cache
+def _look_down_table(share: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For look-down angles 0 .. :data:`MAX_LOOK_DOWN_DEG` (0.25 degree steps), the offsets of
+    a pipe of radius 1 about its axis: where the median stands between the central ``share``'s
+    bounds (0.5 square on, rising with the angle), their span and the lower bound (each (A,))."""
+    t = np.linspace(-1.0, 1.0, 8001)  # rays uniform across their direction
+    rho, span, low = [], [], []
+    for angle in np.radians(np.arange(0.0, MAX_LOOK_DOWN_DEG + 0.125, 0.25)):
+        offsets = np.sin(np.arcsin(t) + angle)
+        lo, median, hi = np.quantile(offsets, [(1.0 - share) / 2.0, 0.5, (1.0 + share) / 2.0])
+        rho.append((median - lo) / (hi - lo))
+        span.append(hi - lo)
+        low.append(lo)
+    return np.array(rho), np.array(span), np.array(low)
 
 
 def _shifted(xy: np.ndarray, shift: float) -> np.ndarray:

@@ -81,7 +81,8 @@ class PipeParams(StageParams):
         lt=1,
         doc="The paper's 'certain percentage': the share of a pipe's points that its diameter "
         "holds. For offsets uniform on [-r, r] the central share spans 2 * share * r, so "
-        "r = half-width / share.",
+        "r = half-width / share; a pipe looked down on is measured from this span and the "
+        "median's distance from its middle (pipes/measure.py).",
     )
 
     # -- vertical pipes (§4.3, Fig. 15) -----------------------------------------------------------
