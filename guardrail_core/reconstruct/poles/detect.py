@@ -340,14 +340,14 @@ def _consistent_offsets(
     centre: np.ndarray,
     accept: np.ndarray,
     params: PoleParams,
-    reference: np.ndarray | None = None,
+    reference: np.ndarray,
 ) -> np.ndarray:
     """(P,) bool: False for an accepted axis that stands off the line of the run's poles.
 
     Each pole's offset is the median signed distance of the rail points (not pole points)
     within ``offset_window_m`` of its axis from the axis, across their principal direction
     (oriented along the run's, so the sign means the same side for every pole). The line is
-    the median offset of the ``reference`` poles (P,) bool (default: the accepted ones). With
+    the median offset of the ``reference`` poles (P,) bool (some of the accepted ones). With
     fewer than ``offset_min_poles`` of them, or fewer than ``offset_min_points`` rail points
     near a pole, nothing is rejected; nor when most of them stand off their own median: the
     offsets then say no line, and rejecting every pole off the median would reject them all.
@@ -371,7 +371,7 @@ def _consistent_offsets(
         across = np.array([-along[1], along[0]])
         offset[j] = float(np.median((near - centre[k]) @ across))
     known = np.isfinite(offset)
-    line = known & (accept if reference is None else reference)[idx]
+    line = known & reference[idx]
     if line.sum() < params.offset_min_poles:
         return keep
     line_offset = np.median(offset[line])
