@@ -9,7 +9,13 @@ from guardrail_core.errors import ReconstructionError
 from guardrail_core.reconstruct.model import Pole
 from guardrail_core.reconstruct.poles import detect_poles
 from guardrail_core.reconstruct.runs import RunParams, group_runs
-from guardrail_core.reconstruct.units import UnitParams, order_poles, split_units, unit_points
+from guardrail_core.reconstruct.units import (
+    UnitParams,
+    order_poles,
+    run_spacing,
+    split_units,
+    unit_points,
+)
 from tests.reconstruct_fixtures import make_run
 
 
@@ -105,6 +111,37 @@ def test_missing_pole_is_inserted_at_the_spacing():
     truth = make_run(5, seed=7).poles
     v = split.poles[int(np.flatnonzero(split.virtual)[0])].position
     assert np.linalg.norm(truth[:, :2] - v[:2], axis=1).min() < 0.01
+
+
+def test_the_spacing_is_the_gap_most_gaps_are_multiples_of():
+    # Missed poles make gaps of two or three spacings; a false pole two odd ones.
+    assert run_spacing(np.array([4.0, 8.0, 4.01, 12.0]), 0.08) == pytest.approx(4.0)
+    assert run_spacing(np.array([2.0, 0.7, 1.3, 2.0, 2.0]), 0.08) == pytest.approx(2.0)
+    # The KITTI motorway's W-beam: a delineator 7.9 m before the posts 4.2 m apart. The median
+    # of the gaps made the spacing 6.0 m.
+    assert run_spacing(np.array([7.86, 4.23]), 0.08) == pytest.approx(4.23)
+    assert run_spacing(np.array([8.0, 8.0]), 0.08) == pytest.approx(8.0)  # every other missed
+
+
+def test_an_end_pole_off_the_spacing_is_no_post():
+    run = make_run(3, spacing=4.0, seed=10)
+    poles = order_poles(_poles(run), run.toward_road)
+    start, step = poles[0].position, poles[1].position - poles[0].position
+    # A delineator post on the rail's line 3.6 m before the first post (0.9 spacings).
+    delineator = Pole(start - 0.9 * step, run.pole_radius, run.pole_height, 30)
+    split = split_units(run.xyz, [delineator, *poles])
+    assert len(split.poles) == 4 and not split.virtual.any()
+    np.testing.assert_allclose([f.length for f in split.frames], 4.0, atol=0.02)
+    assert not any(np.allclose(p.position, delineator.position) for p in split.poles)
+    assert "no post" in split.notes[0]
+    # Two spacings before it, it is a post with one missed between.
+    post = Pole(start - 2.0 * step, run.pole_radius, run.pole_height, 30)
+    split = split_units(run.xyz, [post, *poles])
+    assert len(split.poles) == 6 and split.virtual.sum() == 1
+    # Two poles both stay, whatever their gap: nothing tells which is off.
+    split = split_units(run.xyz, [delineator, poles[0]])
+    seen = [p.position for p, v in zip(split.poles, split.virtual, strict=True) if not v]
+    np.testing.assert_allclose(seen, [delineator.position, poles[0].position])
 
 
 def test_curved_run_units_follow_the_curve():

@@ -5,10 +5,11 @@ The poles are ordered along the run so that the road lies on the +z side of ever
 so a curved run is followed unit by unit.
 
 Missing poles: where the gap between two consecutive detected poles is about k times the run's
-pole spacing (k >= 2, the median gap), k - 1 virtual poles are inserted evenly on the chord,
-so every unit has the design length and superimposes with the others (§4.2); the split
-reports them (``virtual``) and says so in ``notes``. The spacing is only known with at least
-two gaps; a run of two poles is one unit.
+pole spacing (k >= 2; the gap most gaps are whole multiples of, :func:`run_spacing`), k - 1
+virtual poles are inserted evenly on the chord, so every unit has the design length and
+superimposes with the others (§4.2); the split reports them (``virtual``) and says so in
+``notes``. An end pole whose gap is no whole multiple of the spacing is dropped (no post). The
+spacing is only known with at least two gaps; a run of two poles is one unit.
 
 Sparse real scans (a spinning multi-beam scanner's single frame) need two more things:
 
@@ -81,8 +82,20 @@ class UnitParams(StageParams):
     missing_pole_ratio: float = param(
         1.6,
         gt=1,
-        doc="A gap longer than this many times the median gap between poles has missing poles: "
-        "round(gap / median) - 1 virtual poles are inserted in it.",
+        doc="A gap longer than this many times the run's spacing (see ``spacing_tolerance``) "
+        "has missing poles: round(gap / spacing) - 1 virtual poles are inserted in it.",
+    )
+    spacing_tolerance: float = param(
+        0.08,
+        gt=0,
+        lt=0.5,
+        doc="Share of a spacing. The run's spacing is the gap between consecutive poles that "
+        "the most gaps are whole multiples of, within this share of it (the shortest such gap "
+        "on a tie: a missed pole lengthens a gap, it does not shorten one). With three poles "
+        "or more, an end pole whose gap is no whole multiple of the spacing is no post (a "
+        "delineator or a sign post beside the rail's end) and the run ends at its neighbour: "
+        "the spacing of a real W-beam's posts was read as 6.0 m from the gaps 4.2 and 7.9 m, "
+        "and the unit came out a pipe.",
     )
     rail_level_tolerance_m: float = param(
         0.03,
@@ -208,15 +221,60 @@ def order_poles(poles: list[Pole], toward_road: np.ndarray) -> list[Pole]:
     return ordered
 
 
+def _gaps(poles: list[Pole]) -> np.ndarray:
+    """(P - 1,) horizontal distances (m) between consecutive poles."""
+    pos = np.array([p.position for p in poles], np.float64).reshape(-1, 3)
+    return np.linalg.norm(np.diff(pos[:, :2], axis=0), axis=1)
+
+
+def _whole_multiples(gaps: np.ndarray, spacing: float, tolerance: float) -> np.ndarray:
+    """(G,) bool: gaps within ``tolerance`` x ``spacing`` of k x ``spacing``, k >= 1."""
+    k = np.maximum(np.round(gaps / spacing), 1.0)
+    return np.abs(gaps - k * spacing) <= tolerance * spacing
+
+
+def run_spacing(gaps: np.ndarray, tolerance: float) -> float:
+    """The spacing (m) of a run's poles from the gaps (G,) between consecutive ones, G >= 1: the
+    gap that the most gaps are whole multiples of (within ``tolerance`` of it), the shortest of
+    those on a tie. A missed pole makes a gap of two spacings and a false one two odd gaps, so
+    the median, which most gaps being single spacings made right, fails with few gaps."""
+    gaps = np.asarray(gaps, np.float64)
+    candidates = np.sort(gaps[gaps > 0])
+    if len(candidates) == 0:
+        return 0.0
+    support = [int(_whole_multiples(gaps, c, tolerance).sum()) for c in candidates]
+    return float(candidates[int(np.argmax(support))])  # argmax: the first, shortest, of the best
+
+
+def _drop_off_grid_ends(poles: list[Pole], params: UnitParams) -> tuple[list[Pole], list[str]]:
+    """The run without end poles whose gap to their neighbour is no whole multiple of the
+    run's spacing (three poles or more; two always stay)."""
+    if len(poles) < 3:
+        return list(poles), []
+    gaps = _gaps(poles)
+    spacing = run_spacing(gaps, params.spacing_tolerance)
+    fits = _whole_multiples(gaps, spacing, params.spacing_tolerance)
+    first = 0 if fits[0] else 1
+    last = len(poles) - (0 if fits[-1] else 1)
+    if last - first < 2:
+        return list(poles), []
+    notes = [
+        f"pole {i} stands {gaps[min(i, len(gaps) - 1)]:.2f} m from its neighbour, no whole "
+        f"multiple of the run's spacing {spacing:.2f} m: no post, the run ends before it"
+        for i in (*range(first), *range(last, len(poles)))
+    ]
+    return list(poles[first:last]), notes
+
+
 def _fill_missing(
     poles: list[Pole], params: UnitParams
 ) -> tuple[list[Pole], np.ndarray, list[str]]:
-    """Insert virtual poles in gaps of about k x the median spacing (k >= 2)."""
+    """Insert virtual poles in gaps of about k x the run's spacing (k >= 2)."""
     if len(poles) < 3:
         return list(poles), np.zeros(len(poles), bool), []
     pos = np.array([p.position for p in poles])
-    gap = np.linalg.norm(np.diff(pos[:, :2], axis=0), axis=1)
-    spacing = float(np.median(gap))
+    gap = _gaps(poles)
+    spacing = run_spacing(gap, params.spacing_tolerance)
     out: list[Pole] = [poles[0]]
     virtual = [False]
     notes = []
@@ -305,13 +363,34 @@ def _theil_sen(x: np.ndarray, z: np.ndarray) -> tuple[float, float]:
     return slope, float(np.median(z - slope * x))
 
 
+#: Share of a spacing either side of the end pole, and of where the next pole goes, whose rail
+#: points give the rail's offset there.
+_HEADING_WINDOW = 0.25
+
+
+def _heading(t: np.ndarray, offset: np.ndarray, spacing: float) -> np.ndarray:
+    """(2,) unit vector, (along, across), from an end pole to where the rail is a ``spacing``
+    further on: the change of the rail points' median ``offset`` across the current heading
+    (K,) from around the pole (station ``t`` (K,) within ``_HEADING_WINDOW`` spacings of 0) to
+    around the next pole (of ``spacing``); (1, 0), the heading kept, where either holds fewer
+    than three points. A chord, so a curve is followed; medians, so a post or a delineator
+    standing in front of the rail moves nothing (it turned the points' principal direction,
+    and a real one put an extrapolated post 0.4 m off the rail)."""
+    window = _HEADING_WINDOW * spacing
+    here, there = np.abs(t) <= window, np.abs(t - spacing) <= window
+    if here.sum() < 3 or there.sum() < 3:
+        return np.array([1.0, 0.0])
+    rise = float(np.median(offset[there]) - np.median(offset[here]))
+    return np.array([spacing, rise]) / np.hypot(spacing, rise)
+
+
 def _extend_ends(
     poles: list[Pole], rails: np.ndarray, params: UnitParams
 ) -> tuple[list[Pole], int, int]:
     """Virtual poles beyond both end poles where the rail goes on (see ``min_extension_points``).
 
     Each new pole stands a spacing (the median gap) from the current end pole, along the
-    principal direction of the rail points within the next spacing (a curve is followed), its
+    heading of the rail points within a spacing of it (:func:`_heading`; a curve is followed), its
     ground raised or lowered as the rail's top (``rail_top_percentile`` of z) rises or falls from the
     previous stretch to the next. Returns the poles and how many were added before and after.
     """
@@ -346,10 +425,15 @@ def _extend_ends(
                 top_before = float(np.percentile(rails[behind, 2], params.rail_top_percentile))
             xy = rails[ahead, :2]
             _, _, vt = np.linalg.svd(xy - xy.mean(axis=0), full_matrices=False)
-            turn = vt[0] if vt[0] @ direction >= 0 else -vt[0]
-            if turn @ direction < max_turn_cos:
+            if abs(vt[0] @ direction) < max_turn_cos:
                 break  # not a rail going on: clutter across it, or the run's end turning away
-            direction = turn
+            around = near & (t >= -_HEADING_WINDOW * spacing)
+            around &= t <= (1 + _HEADING_WINDOW) * spacing
+            across_dir = np.array([-direction[1], direction[0]])
+            heading = _heading(t[around], (d @ across_dir)[around], spacing)
+            direction = heading[0] * direction + heading[1] * np.array(
+                [-direction[1], direction[0]]
+            )
             top = float(np.percentile(rails[ahead, 2], params.rail_top_percentile))
             cur = np.array([*(cur[:2] + spacing * direction), cur[2] + top - top_before])
             top_before = top
@@ -386,7 +470,9 @@ def split_units(xyz: np.ndarray, poles: list[Pole], params: UnitParams = UnitPar
         note = f"{len(poles)} pole(s): no unit"
         none = np.zeros(len(poles), bool)
         return UnitSplit([], np.full(n, -1, np.int32), list(poles), none, (note,), none)
-    all_poles, virtual, notes = _fill_missing(list(poles), params)
+    kept, dropped = _drop_off_grid_ends(list(poles), params)
+    all_poles, virtual, notes = _fill_missing(kept, params)
+    notes[:0] = dropped
     all_poles, level_notes = _level_to_rail(all_poles, xyz, params)
     notes.extend(level_notes)
     all_poles, n_before, n_after = _extend_ends(all_poles, xyz, params)
