@@ -66,6 +66,15 @@ def test_simulate_takes_the_scanner_s_conditions_and_a_bare_roadside(tmp_path: P
     assert "roadside" not in spec["road"]
     kinds = {o["kind"] for o in json.loads((out / "truth" / "objects.json").read_text())}
     assert not kinds & {"hedge", "shrub", "tall_grass"}
+    # Long runs and a street without curbs, as a motorway's shoulder.
+    road = tmp_path / "road"
+    options = ["--long-runs", "1", "--curb-height", "0", "--quiet"]
+    assert main(["simulate", str(road), *args[2:], *options]) == 0
+    spec = yaml.safe_load((road / "truth" / "scene.yaml").read_text())
+    assert spec["road"]["curb"] == {"height": 0.0}
+    assert spec["guardrails"][0]["length"] >= 40  # the first run: the street goes on past it
+    assert main(["simulate", str(tmp_path / "z"), "--long-runs", "2", "--quiet"]) == 2
+    assert not (tmp_path / "z").exists()
     # A dropout out of range is named with its key, and nothing is written.
     assert main([*args[:1], str(tmp_path / "y"), "--dropout", "2", "--quiet"]) == 2
     assert not (tmp_path / "y").exists()

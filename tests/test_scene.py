@@ -12,7 +12,13 @@ from guardrail_core.classes import TruthClass
 from guardrail_core.errors import SceneSpecError
 from guardrail_core.synth.confounders import CONFOUNDER_KINDS
 from guardrail_core.synth.designs import list_designs, load_design
-from guardrail_core.synth.scene import build_scene, list_scenes, load_scene_spec, random_scene_spec
+from guardrail_core.synth.scene import (
+    LONG_RUN_M,
+    build_scene,
+    list_scenes,
+    load_scene_spec,
+    random_scene_spec,
+)
 from guardrail_core.synth.vegetation import VEGETATION_KINDS
 
 
@@ -37,6 +43,52 @@ def test_random_scene_mixes_every_design_and_every_kind() -> None:
     assert {load_design(d).type for d in designs} == {"pipe", "beam"}
     paints = {o["paint"] for o in scene.objects if o["kind"] == "guardrail"}
     assert len(paints) >= 3  # colour alone cannot tell a guardrail
+
+
+def test_random_streets_can_hold_long_guardrail_runs() -> None:
+    """long_runs: that share of the runs is 40-120 m long (a run that would pass the street's
+    end stops before it, at any length); 0, the default, leaves every seed's street as it was,
+    with runs of 6-24 m."""
+    plain = [random_scene_spec(seed, 300.0) for seed in range(20)]
+    assert [random_scene_spec(seed, 300.0, long_runs=0.0) for seed in range(20)] == plain
+    assert max(g["length"] for spec in plain for g in spec["guardrails"]) <= 24
+    runs = [
+        g
+        for seed in range(20)
+        for g in random_scene_spec(seed, 300.0, long_runs=0.35)["guardrails"]
+    ]
+    lengths = np.array([g["length"] for g in runs])
+    long = lengths >= LONG_RUN_M[0]
+    assert abs(long.mean() - 0.35) < 0.06
+    assert lengths.max() <= LONG_RUN_M[1] and lengths.min() >= 2 * 2.0
+    assert np.mean((lengths <= 24) | long) > 0.98  # the rest stopped at the street's end
+    assert {g["design"] for g, is_long in zip(runs, long, strict=True) if is_long} == set(
+        list_designs()
+    )
+    with pytest.raises(SceneSpecError, match="--long-runs"):
+        random_scene_spec(1, 100.0, long_runs=1.5)
+
+
+def test_a_street_without_curbs_has_its_guardrails_at_road_level() -> None:
+    """curb_height 0: the same street with every guardrail post 0.15 m (the default curb)
+    lower, on a shoulder at road level."""
+    curbs = build_scene(random_scene_spec(1, 60.0), seed=1)
+    shoulders = build_scene(random_scene_spec(1, 60.0, curb_height=0.0), seed=1)
+
+    def post_heights(scene) -> np.ndarray:
+        return np.array(
+            [
+                p["position"][2]
+                for o in scene.objects
+                if o["kind"] == "guardrail"
+                for p in o["poles"]
+            ]
+        )
+
+    assert len(post_heights(curbs)) >= 20
+    np.testing.assert_allclose(post_heights(curbs) - post_heights(shoulders), 0.15, atol=1e-9)
+    with pytest.raises(SceneSpecError, match="--curb-height"):
+        random_scene_spec(1, 100.0, curb_height=-0.1)
 
 
 def test_random_scene_is_reproducible_and_round_trips_through_yaml(tmp_path: Path) -> None:

@@ -94,6 +94,21 @@ def add_parser(subparsers: common.Subparsers) -> None:
         help="a random scene's verges level and bare: no embankments, ditches, hedges, shrubs "
         "or tall grass",
     )
+    own.add_argument(
+        "--long-runs",
+        type=float,
+        default=0.0,
+        metavar="SHARE",
+        help="share (0-1) of a random scene's guardrail runs that are 40-120 m long, as along "
+        "embankments and motorways (default 0: runs of 6-24 m)",
+    )
+    own.add_argument(
+        "--curb-height",
+        type=float,
+        metavar="METRES",
+        help="a random scene's curb height (default 0.15; 0: no curb, sidewalks and guardrails "
+        "at road level, as on a motorway's shoulder)",
+    )
     parser = subparsers.add_parser(
         "simulate",
         help="simulate a mapping drive with exact ground truth",
@@ -115,11 +130,16 @@ def run(args: argparse.Namespace) -> int:
             print(
                 "note: --length is ignored with --scene (the spec sets the drive)", file=sys.stderr
             )
-        if not args.roadside:
-            print(
-                "note: --no-roadside is ignored with --scene (the spec sets the verges)",
-                file=sys.stderr,
-            )
+        for given, option in (
+            (not args.roadside, "--no-roadside"),
+            (args.long_runs != 0.0, "--long-runs"),
+            (args.curb_height is not None, "--curb-height"),
+        ):
+            if given:
+                print(
+                    f"note: {option} is ignored with --scene (the spec sets the street)",
+                    file=sys.stderr,
+                )
     else:
         designs = args.designs.split(",") if args.designs else None
         spec = random_scene_spec(
@@ -127,6 +147,8 @@ def run(args: argparse.Namespace) -> int:
             args.length if args.length is not None else 100.0,
             designs=designs,
             roadside=args.roadside,
+            long_runs=args.long_runs,
+            curb_height=args.curb_height,
         )
     scanner = dict(spec.get("scanner") or {})
     if args.scanner:

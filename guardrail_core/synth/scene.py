@@ -390,19 +390,39 @@ _EXTENT = {
 }
 
 
+#: Length (m) of a random street's long guardrail runs (``long_runs``): roads keep a guardrail
+#: along an embankment, a bridge approach or a whole stretch of motorway.
+LONG_RUN_M = (40.0, 120.0)
+
+
 def random_scene_spec(
-    seed: int, length: float, designs: Sequence[str] | None = None, *, roadside: bool = True
+    seed: int,
+    length: float,
+    designs: Sequence[str] | None = None,
+    *,
+    roadside: bool = True,
+    long_runs: float = 0.0,
+    curb_height: float | None = None,
 ) -> dict:
     """A random street ``length`` metres long (plus run-in and run-out) mixing every design and kind.
 
     Guardrail runs take turns through ``designs`` (default: all shipped designs); confounders take
-    turns through all kinds, so a drive of ~150 m or more holds each of them at least once.
+    turns through all kinds, so a drive of ~150 m or more holds each of them at least once. A run
+    is 3-12 units of a 2 m design or 3-6 of a 4 m one; ``long_runs`` (0-1) of the runs are
+    40-120 m long instead (:data:`LONG_RUN_M`; drawn from a stream of their own, so with 0 the
+    street is that of the seed before this option). ``curb_height`` (m): the curbs' height
+    (default the road's 0.15 m; 0: no curb, the sidewalks and guardrails at road level, as on a
+    rural road's or a motorway's shoulder).
     ``roadside``: the verges get embankments, ditches, hedges, shrubs and tall grass
     (:func:`_green_roadside`), drawn from a stream of their own: the road, guardrails and other
     objects are those of the same seed without them.
     """
     if length < 20:
         raise SceneSpecError(f"--length: a drive needs at least 20 m, got {length} m")
+    if not 0.0 <= long_runs <= 1.0:
+        raise SceneSpecError(f"--long-runs: a share from 0 to 1, got {long_runs}")
+    if curb_height is not None and not 0.0 <= curb_height <= 0.5:
+        raise SceneSpecError(f"--curb-height: 0 to 0.5 m, got {curb_height}")
     shipped = list_designs()
     design_pool = shipped if designs is None else list(designs)
     unknown = sorted(set(design_pool) - set(shipped))
@@ -442,6 +462,8 @@ def random_scene_spec(
         "sidewalk": sidewalk,
         "verge": 6.0,
     }
+    if curb_height is not None:
+        road["curb"] = {"height": float(curb_height)}
     vehicle_lane = int(rng.integers(0, lanes))
     v_lo = float(rng.uniform(5.0, 10.0))
     vehicle = {
@@ -452,6 +474,7 @@ def random_scene_spec(
     }
 
     queue = [str(d) for d in rng.permutation(design_pool)]
+    run_lengths = np.random.default_rng([seed, 22])  # a stream of its own, as the roadside's
     kinds = [str(k) for k in rng.permutation(CONFOUNDER_KINDS)]
     guardrails: list[dict] = []
     objects: list[dict] = []
@@ -473,6 +496,8 @@ def random_scene_spec(
             design = load_design(queue.pop(0) if queue else str(rng.choice(design_pool)))
             spacing = design.unit_length
             units = int(rng.integers(3, 13 if spacing < 3 else 7))
+            if run_lengths.random() < long_runs:
+                units = max(3, int(round(run_lengths.uniform(*LONG_RUN_M) / spacing)))
             run = units * spacing
             if s + run > total - 2:
                 units = int((total - 2 - s) // spacing)
