@@ -2,24 +2,27 @@
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import json
 from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 
 from guardrail_core.errors import IncompatibleModelError, InvalidOptionError, ModelFormatError
 from guardrail_core.extract.model_folder import DEFAULT_MODEL_DIR, load_model
 from guardrail_core.extract.segment_head import (
     SegmentHead,
     SegmentHeadParams,
+    average_of_members,
     fit_segment_head,
     head_inputs,
 )
 from guardrail_core.extract.shape_features import SEGMENT_FEATURE_DIM, SEGMENT_FEATURE_NAMES
 
-QUICK = SegmentHeadParams(hidden_units=16, epochs=300)
+QUICK = SegmentHeadParams(hidden_units=16, epochs=300, members=1)
 
 
 def test_inputs_carry_the_crop_logit_and_whether_there_was_a_crop() -> None:
@@ -146,6 +149,38 @@ def test_weighted_labels_outvote_many_others() -> None:
             fit_segment_head(features, crop, labels, QUICK, sample_weight=bad)
 
 
+def test_members_are_separate_trainings_whose_logits_are_averaged() -> None:
+    """A head of k members is one network k x hidden_units wide: member m's hidden units are
+    block m, and the output averages the members' logits. Member 0 starts from the draw a
+    one-member head of the same seed starts from and is trained as it is, so it ends the same."""
+    rng = np.random.default_rng(4)
+    features, crop, labels = synthetic(2000, rng)
+    one = fit_segment_head(features, crop, labels, QUICK, seed=5).weights("")
+    three = fit_segment_head(
+        features, crop, labels, dataclasses.replace(QUICK, members=3), seed=5
+    ).weights("")
+    h = QUICK.hidden_units
+    assert three["net.0.weight"].shape == (3 * h, 5) and three["net.2.weight"].shape == (2, 3 * h)
+    np.testing.assert_allclose(three["net.0.weight"][:h], one["net.0.weight"], atol=1e-4)
+    np.testing.assert_allclose(three["net.0.bias"][:h], one["net.0.bias"], atol=1e-4)
+    np.testing.assert_allclose(3 * three["net.2.weight"][:, :h], one["net.2.weight"], atol=1e-4)
+    # The other members started elsewhere and ended elsewhere.
+    blocks = three["net.0.weight"].reshape(3, h, 5)
+    assert np.abs(blocks[1] - blocks[0]).max() > 0.1 and np.abs(blocks[2] - blocks[1]).max() > 0.1
+
+    generator = torch.Generator().manual_seed(0)
+    w1, b1 = torch.randn(3 * 4, 5, generator=generator), torch.randn(3 * 4, generator=generator)
+    w2, b2 = torch.randn(3, 2, 4, generator=generator), torch.randn(3, 2, generator=generator)
+    x = torch.randn(7, 5, generator=generator)
+    members = [
+        torch.relu(x @ w1[4 * m : 4 * m + 4].T + b1[4 * m : 4 * m + 4]) @ w2[m].T + b2[m]
+        for m in range(3)
+    ]
+    torch.testing.assert_close(
+        average_of_members(w1, b1, w2, b2)(x), torch.stack(members).mean(dim=0)
+    )
+
+
 def test_the_proba_range_holds_every_crop_probability_and_is_reached() -> None:
     rng = np.random.default_rng(2)
     head = fit_segment_head(*synthetic(2000, rng), QUICK)
@@ -165,9 +200,15 @@ def test_the_proba_range_holds_every_crop_probability_and_is_reached() -> None:
 
 
 def typical_features(head: SegmentHead, n: int, rng: np.random.Generator) -> np.ndarray:
-    """(n, F) float32 segment features drawn around the head's standardisation."""
+    """(n, F) float32 segment features: those the head reads drawn around its standardisation,
+    any it leaves unread (the default model's intensities) 0."""
     k = head.n_inputs - 2
-    return (head.mean[:k] + head.scale[:k] * rng.normal(size=(n, k))).astype(np.float32)
+    read = (head.mean[:k] + head.scale[:k] * rng.normal(size=(n, k))).astype(np.float32)
+    if head.columns is None:
+        return read
+    features = np.zeros((n, SEGMENT_FEATURE_DIM), np.float32)
+    features[:, head.columns] = read
+    return features
 
 
 @pytest.mark.parametrize("clip", [1e-5, 0.01, 0.2])

@@ -9,7 +9,6 @@ that never saw that crop), so it learns how far to trust the crop classifier on 
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -33,7 +32,17 @@ def max_logit(clip: float) -> float:
 class SegmentHeadParams(StageParams):
     """Training of the segment head."""
 
-    hidden_units: int = param(64, ge=1, le=4096, doc="width of the one hidden ReLU layer")
+    hidden_units: int = param(64, ge=1, le=4096, doc="width of each member's hidden ReLU layer")
+    members: int = param(
+        3,
+        ge=1,
+        le=32,
+        doc="networks trained side by side from different initial weights, their logits "
+        "averaged (the saved head is one network, members x hidden_units wide): one network's "
+        "verdict on a segment unlike its training segments swings with its initial draw (on the "
+        "real KITTI street, two draws called 110 and 1,065 points guardrail), the average far "
+        "less. Training takes members times as long",
+    )
     epochs: int = param(1000, ge=1, le=100_000, doc="full-batch AdamW steps")
     lr: float = param(1e-2, gt=0, le=1, doc="learning rate")
     weight_decay: float = param(1e-4, ge=0, le=1, doc="AdamW decoupled weight decay")
@@ -100,8 +109,29 @@ def head_inputs(
     )
 
 
+def _layers(n_inputs: int, hidden_units: int) -> tuple[nn.Linear, nn.Linear]:
+    """A network's two layers, freshly drawn (in this order, as :func:`_network` draws them)."""
+    return nn.Linear(n_inputs, hidden_units), nn.Linear(hidden_units, 2)
+
+
 def _network(n_inputs: int, hidden_units: int) -> nn.Sequential:
-    return nn.Sequential(nn.Linear(n_inputs, hidden_units), nn.ReLU(), nn.Linear(hidden_units, 2))
+    first, second = _layers(n_inputs, hidden_units)
+    return nn.Sequential(first, nn.ReLU(), second)
+
+
+def average_of_members(
+    w1: torch.Tensor, b1: torch.Tensor, w2: torch.Tensor, b2: torch.Tensor
+) -> nn.Sequential:
+    """One network whose logits are the mean of k members': their hidden layers side by side
+    (w1 (k H, D), b1 (k H,)), their output layers (w2 (k, 2, H), b2 (k, 2)) each weighted 1 / k."""
+    k, _, h = w2.shape
+    first, second = _layers(w1.shape[1], k * h)
+    with torch.no_grad():
+        first.weight.copy_(w1)
+        first.bias.copy_(b1)
+        second.weight.copy_(w2.permute(1, 0, 2).reshape(2, k * h) / k)
+        second.bias.copy_(b2.mean(dim=0))
+    return nn.Sequential(first, nn.ReLU(), second)
 
 
 class SegmentHead:
@@ -265,7 +295,8 @@ def fit_segment_head(
     columns: np.ndarray | None = None,
     sample_weight: np.ndarray | None = None,
 ) -> SegmentHead:
-    """Train a segment head, full batch, with balanced class weights.
+    """Train a segment head, full batch, with balanced class weights: ``params.members``
+    networks from different initial weights, saved as one network that averages their logits.
 
     Parameters
     ----------
@@ -301,27 +332,32 @@ def fit_segment_head(
     z = torch.from_numpy((x - mean) / scale)
     target = torch.from_numpy(y.astype(np.int64))
     class_weight = torch.tensor(len(y) / (2 * counts), dtype=torch.float32)
+    # CrossEntropyLoss's weighted mean, each term weighted by its class and its segment.
+    w = class_weight[target]
+    if sample_weight is not None:
+        w = w * torch.from_numpy(sample_weight)
+    each = nn.CrossEntropyLoss(reduction="none")
+    k = params.members
     with torch.random.fork_rng(devices=[]), one_thread():
         torch.manual_seed(seed)
-        net = _network(x.shape[1], params.hidden_units)
-        loss_fn: Callable[[torch.Tensor, torch.Tensor], torch.Tensor]
-        if sample_weight is None:
-            loss_fn = nn.CrossEntropyLoss(weight=class_weight)
-        else:
-            # CrossEntropyLoss's weighted mean, each term also weighted by its segment.
-            w = class_weight[target] * torch.from_numpy(sample_weight)
-            each = nn.CrossEntropyLoss(reduction="none")
-
-            def weighted(logits: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
-                return (each(logits, target) * w).sum() / w.sum()
-
-            loss_fn = weighted
+        members = [_layers(x.shape[1], params.hidden_units) for _ in range(k)]
+        # The members as stacked tensors, trained in one pass: each member's loss reaches only
+        # its own weights, and AdamW updates every weight on its own, so this is k trainings.
+        h = params.hidden_units
+        w1 = nn.Parameter(torch.cat([a.weight.detach() for a, _ in members]))  # (k H, D)
+        b1 = nn.Parameter(torch.cat([a.bias.detach() for a, _ in members]))  # (k H,)
+        w2 = nn.Parameter(torch.stack([b.weight.detach() for _, b in members]))  # (k, 2, H)
+        b2 = nn.Parameter(torch.stack([b.bias.detach() for _, b in members]))  # (k, 2)
         optimiser = torch.optim.AdamW(
-            net.parameters(), lr=params.lr, weight_decay=params.weight_decay
+            [w1, b1, w2, b2], lr=params.lr, weight_decay=params.weight_decay
         )
-        net.train()
         for _ in range(params.epochs):
             optimiser.zero_grad()
-            loss_fn(net(z), target).backward()
+            hidden = torch.relu(torch.addmm(b1, z, w1.T)).view(len(z), k, h)
+            logits = torch.einsum("skh,kch->skc", hidden, w2) + b2  # (S, k, 2)
+            # Each member's weighted mean loss, summed over the members.
+            loss = (each(logits.permute(0, 2, 1), target[:, None].expand(-1, k)) * w[:, None]).sum()
+            (loss / w.sum()).backward()
             optimiser.step()
+        net = average_of_members(w1.detach(), b1.detach(), w2.detach(), b2.detach())
     return SegmentHead(mean.astype(np.float32), scale.astype(np.float32), net, columns)
