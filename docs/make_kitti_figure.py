@@ -46,10 +46,11 @@ def main() -> None:
             p.stem: trimesh.load(p, force="mesh")
             for p in run.folder.reconstruction.mesh_files("ply").values()
         }
-    xyz = drive.points.xyz
-    segment = run.point_segment
-    found = np.zeros(len(xyz), bool)
-    found[segment >= 0] = run.segments["label"][segment[segment >= 0]]
+        # Read now: the run folder's tables load when first asked for, and it goes with `tmp`.
+        xyz = drive.points.xyz
+        segment = run.point_segment
+        found = np.zeros(len(xyz), bool)
+        found[segment >= 0] = run.segments["label"][segment[segment >= 0]]
     window = (np.abs(xyz[:, 0]) < 40) & (np.abs(xyz[:, 1]) < 22)
 
     fig = plt.figure(figsize=(14, 8.5))
