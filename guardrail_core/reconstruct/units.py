@@ -389,7 +389,7 @@ def _extend_ends(
 ) -> tuple[list[Pole], int, int]:
     """Virtual poles beyond both end poles where the rail goes on (see ``min_extension_points``).
 
-    Each new pole stands a spacing (the median gap) from the current end pole, along the
+    Each new pole stands a spacing (:func:`run_spacing`) from the current end pole, along the
     heading of the rail points within a spacing of it (:func:`_heading`; a curve is followed), its
     ground raised or lowered as the rail's top (``rail_top_percentile`` of z) rises or falls from the
     previous stretch to the next. Returns the poles and how many were added before and after.
@@ -397,7 +397,7 @@ def _extend_ends(
     if params.min_extension_points <= 0 or len(poles) < 2 or len(rails) == 0:
         return list(poles), 0, 0
     pos = np.array([p.position for p in poles], np.float64)
-    spacing = float(np.median(np.linalg.norm(np.diff(pos[:, :2], axis=0), axis=1)))
+    spacing = run_spacing(_gaps(poles), params.spacing_tolerance)
     if spacing <= 0:
         return list(poles), 0, 0
     radius = float(np.median([p.radius for p in poles]))
