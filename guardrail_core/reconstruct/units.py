@@ -431,9 +431,7 @@ def _extend_ends(
             around &= t <= (1 + _HEADING_WINDOW) * spacing
             across_dir = np.array([-direction[1], direction[0]])
             heading = _heading(t[around], (d @ across_dir)[around], spacing)
-            direction = heading[0] * direction + heading[1] * np.array(
-                [-direction[1], direction[0]]
-            )
+            direction = heading[0] * direction + heading[1] * across_dir
             top = float(np.percentile(rails[ahead, 2], params.rail_top_percentile))
             cur = np.array([*(cur[:2] + spacing * direction), cur[2] + top - top_before])
             top_before = top
