@@ -50,7 +50,7 @@ def path_labels(drive_path: Path, model, params: ExtractionParams) -> tuple[str,
     out = {}
     for name, p in probability.items():
         raw = p >= model.threshold
-        out[name] = (truth, raw, correct_labels(raw, result.extents(), params.correction))
+        out[name] = (truth, raw, correct_labels(raw, result.extents(), params.correction, p))
     kind = drive.scanner.kind if drive.images else f"{drive.scanner.kind}, no images"
     return kind, out
 

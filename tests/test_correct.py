@@ -41,6 +41,24 @@ def test_an_other_segment_inside_a_run_becomes_guardrail() -> None:
     np.testing.assert_array_equal(corrected, np.ones(10, bool))
 
 
+def test_a_segment_the_classifier_is_sure_of_is_not_filled() -> None:
+    """Holes of one and of two slices; the floor, and NaN (no answer) fillable."""
+    labels = np.ones(12, bool)
+    labels[[3, 7, 8]] = False
+    probability = np.full(12, 0.9)
+    probability[[3, 7, 8]] = [0.05, 0.3, 0.09]
+    segments = extents(*run(range(12)))
+    np.testing.assert_array_equal(correct_labels(labels, segments), np.ones(12, bool))
+    floor = correct_labels(labels, segments, CorrectionParams(), probability)
+    np.testing.assert_array_equal(np.flatnonzero(~floor), [3, 7, 8])  # a hole of two: both or none
+    probability[[3, 8]] = [0.1, np.nan]
+    np.testing.assert_array_equal(correct_labels(labels, segments, probability=probability), True)
+    off = CorrectionParams(fill_min_probability=0.0)
+    np.testing.assert_array_equal(correct_labels(labels, segments, off, probability * 0), True)
+    with pytest.raises(GuardrailError, match="probabilities of shape"):
+        correct_labels(labels, segments, probability=probability[:5])
+
+
 def test_a_lone_guardrail_segment_becomes_other() -> None:
     """Alone, and among other segments that touch it: a run of one slice is isolated."""
     np.testing.assert_array_equal(correct_labels(np.array([True]), extents((3, BEAM))), [False])

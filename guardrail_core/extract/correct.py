@@ -72,6 +72,15 @@ class CorrectionParams(StageParams):
         doc="other segments inside a run are filled in holes of up to this many consecutive "
         "slices (each segment of a hole of two fitting the guardrail segments on its side)",
     )
+    fill_min_probability: float = param(
+        0.1,
+        ge=0,
+        le=1,
+        doc="an other segment is filled only if the classifier gave it at least this P(guardrail) "
+        "(one without an answer can be filled): one it is sure of stays other. On four simulated "
+        "development streets 64 of the 67 fills of segments under 0.1 were wrong (hedges and "
+        "fences behind the rails); 0 fills by position alone, as the paper does",
+    )
     min_run_slices: int = param(
         2,
         ge=1,
@@ -227,7 +236,10 @@ def _fits_between(
 
 
 def correct_labels(
-    labels: np.ndarray, extents: SegmentExtents, params: CorrectionParams = CorrectionParams()
+    labels: np.ndarray,
+    extents: SegmentExtents,
+    params: CorrectionParams = CorrectionParams(),
+    probability: np.ndarray | None = None,
 ) -> np.ndarray:
     """Correct raw segment labels by their neighbours.
 
@@ -236,6 +248,9 @@ def correct_labels(
     labels : (S,) bool, raw labels (True: guardrail)
     extents : where the segments lie
     params : the rules
+    probability : (S,) float, the classifier's P(guardrail) of each segment (NaN: no answer), or
+        None (none known: every other segment may be filled); segments under
+        ``params.fill_min_probability`` are not filled
 
     Returns
     -------
@@ -255,8 +270,15 @@ def correct_labels(
     ):
         if len(array) != n:
             raise InvalidOptionError(f"correct_labels: {n} labels but {len(array)} rows of {name}")
+    if probability is not None and np.shape(probability) != (n,):
+        raise InvalidOptionError(
+            f"correct_labels: {n} labels but probabilities of shape {np.shape(probability)}"
+        )
     if n == 0:
         return labels
+    fillable = np.ones(n, bool)
+    if probability is not None:
+        fillable = ~(np.asarray(probability, np.float64) < params.fill_min_probability)  # NaN: yes
     slice_index = np.asarray(extents.slice_index, np.int64)
     pairs = neighbour_pairs(extents, params)
 
@@ -265,7 +287,7 @@ def correct_labels(
     lateral = np.asarray(extents.lateral, np.float64)
     height = np.asarray(extents.height, np.float64)
     before, after, low, high = _guardrail_sides(labels, pairs, slice_index, lateral, height)
-    fits = _fits_between(lateral, height, low, high, params)
+    fits = _fits_between(lateral, height, low, high, params) & fillable
     fill = ~labels & before & after & fits
     if params.max_hole_slices == 2:
         # Two other segments in consecutive slices, each fitting the guardrail on its side,

@@ -239,7 +239,7 @@ def process_window(
         )
         embeddings = scores.embeddings
     with timer.stage("correction", points=len(segments)):
-        label = correct_labels(raw_label, result.extents(), params.correction)
+        label = correct_labels(raw_label, result.extents(), params.correction, probability)
 
     with timer.stage("write", points=len(segments)):
         # A segment belongs to the tile that owns its slice (tile edges are slice edges).

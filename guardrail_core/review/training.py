@@ -464,7 +464,7 @@ def predict_run(
     if correction is None:
         correction = _run_correction(run)
     extents = SegmentExtents(segments["slice_index"], segments["lateral"], segments["height"])
-    label = correct_labels(raw_label, extents, correction)
+    label = correct_labels(raw_label, extents, correction, probability)
     out = {
         "crop_probability": crop_probability,
         "probability": probability,
@@ -620,6 +620,8 @@ def _run_classify(run: Run) -> ClassifyParams:
 
 
 def _run_correction(run: Run) -> CorrectionParams:
-    stored = run.info.params.get("correction") or {}
+    """The run's own correction rules; a run from before the fill floor filled by position
+    alone."""
+    stored = {"fill_min_probability": 0.0, **(run.info.params.get("correction") or {})}
     known = CorrectionParams.__dataclass_fields__
     return CorrectionParams(**{k: v for k, v in stored.items() if k in known})
