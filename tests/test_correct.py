@@ -20,13 +20,28 @@ BEAM = (2.0, 2.1, 0.3, 1.0)
 CURB = (1.7, 1.9, 0.0, 0.13)
 
 
-def extents(*segments: tuple[int, tuple[float, float, float, float]]) -> SegmentExtents:
-    """Extents from (slice, (lateral lo, lateral hi, height lo, height hi)) per segment."""
+def extents(
+    *segments: tuple[int, tuple[float, float, float, float]], component=None, n_points=None
+) -> SegmentExtents:
+    """Extents from (slice, (lateral lo, lateral hi, height lo, height hi)) per segment, all of
+    one wireframe component and of 100 points unless ``component`` and ``n_points`` (S,) say
+    otherwise."""
     if not segments:
-        return SegmentExtents(np.zeros(0, np.int64), np.zeros((0, 2)), np.zeros((0, 2)))
+        empty = np.zeros(0, np.int64)
+        return SegmentExtents(empty, np.zeros((0, 2)), np.zeros((0, 2)), empty, empty)
     slices = np.array([s for s, _ in segments], np.int64)
     box = np.array([b for _, b in segments], np.float64)
-    return SegmentExtents(slices, box[:, :2], box[:, 2:])
+    if component is None:
+        component = np.zeros(len(slices), np.int64)
+    if n_points is None:
+        n_points = np.full(len(slices), 100, np.int64)
+    return SegmentExtents(
+        slices,
+        box[:, :2],
+        box[:, 2:],
+        np.asarray(component, np.int64),
+        np.asarray(n_points, np.int64),
+    )
 
 
 def run(slices, box=BEAM) -> list[tuple[int, tuple[float, float, float, float]]]:
@@ -57,6 +72,97 @@ def test_a_segment_the_classifier_is_sure_of_is_not_filled() -> None:
     np.testing.assert_array_equal(correct_labels(labels, segments, off, probability * 0), True)
     with pytest.raises(GuardrailError, match="probabilities of shape"):
         correct_labels(labels, segments, probability=probability[:5])
+
+
+#: A hedge 0.3 m behind BEAM, as tall as a person.
+HEDGE = (2.4, 2.9, 0.0, 1.6)
+
+
+def rail_and(behind: tuple[float, float, float, float], slices=range(10), **params):
+    """Corrected labels of a rail (component 0, slices 0-9) and what stands behind it
+    (component 1, ``slices``), all labelled guardrail: (rail labels, labels behind)."""
+    segments = run(range(10)) + run(slices, behind)
+    component = [0] * 10 + [1] * len(slices)
+    labels = correct_labels(
+        np.ones(len(segments), bool),
+        extents(*segments, component=component),
+        CorrectionParams(**params),
+    )
+    return labels[:10], labels[10:]
+
+
+def test_what_stands_behind_a_rail_becomes_other() -> None:
+    rail, hedge = rail_and(HEDGE)
+    assert rail.all() and not hedge.any()
+    left = tuple(-v for v in (HEDGE[1], HEDGE[0])) + HEDGE[2:]  # the left side of the path
+    beam_left = (-BEAM[1], -BEAM[0], *BEAM[2:])
+    segments = run(range(10), beam_left) + run(range(10), left)
+    labels = correct_labels(np.ones(20, bool), extents(*segments, component=[0] * 10 + [1] * 10))
+    np.testing.assert_array_equal(labels, [True] * 10 + [False] * 10)
+
+
+def test_a_rails_own_parts_behind_it_stay_guardrail() -> None:
+    """A post behind a beam, or the back rail of a double-sided barrier, is of its component."""
+    segments = run(range(10)) + run(range(10), HEDGE)
+    labels = correct_labels(np.ones(20, bool), extents(*segments))  # all component 0
+    assert labels.all()
+
+
+@pytest.mark.parametrize(
+    "behind, slices, params",
+    [
+        ((2.15, 2.5, 0.3, 1.0), range(10), {}),  # 5 cm behind: within behind_gap_m
+        ((-2.9, -2.4, 0.0, 1.6), range(10), {}),  # across the path
+        (HEDGE, range(10), {"behind_gap_m": float("inf")}),  # the rule off
+        ((3.2, 3.4, 0.5, 1.1), range(10), {}),  # a barrier of its own, 1.1 m behind
+    ],
+)
+def test_what_is_not_behind_a_rail_stays(behind, slices, params) -> None:
+    rail, other = rail_and(behind, slices, **params)
+    assert rail.all() and other.all()
+
+
+def test_a_gap_behind_a_rail_not_under_its_maximum_is_a_named_error() -> None:
+    with pytest.raises(GuardrailError, match="behind_gap_m"):
+        CorrectionParams(behind_gap_m=1.0, behind_max_m=1.0)
+    CorrectionParams(behind_gap_m=float("inf"), behind_max_m=1.0)  # off
+
+
+def test_a_short_false_alarm_in_front_does_not_take_the_rail_behind_it() -> None:
+    """Three slices of a curb called guardrail (under behind_front_min_slices) before a rail."""
+    curb = (1.2, 1.4, 0.0, 0.15)
+    segments = run(range(3), curb) + run(range(10))
+    labels = correct_labels(np.ones(13, bool), extents(*segments, component=[1] * 3 + [0] * 10))
+    assert labels.all()
+    longer = run(range(4), curb) + run(range(10))
+    labels = correct_labels(np.ones(14, bool), extents(*longer, component=[1] * 4 + [0] * 10))
+    np.testing.assert_array_equal(labels, [True] * 4 + [False] * 4 + [True] * 6)
+
+
+def test_a_fragment_of_a_rail_does_not_stand_in_front_of_the_rest() -> None:
+    """A multi-beam scan: a rail's slice in fragments of a few points, one 15 cm nearer."""
+    fragment = (1.8, 1.85, 0.6, 0.6)
+    segments = run(range(10), fragment) + run(range(10))
+    component, points = [1] * 10 + [0] * 10, [4] * 10 + [6] * 10
+    labels = correct_labels(
+        np.ones(20, bool), extents(*segments, component=component, n_points=points)
+    )
+    assert labels.all()
+    points = [5] * 10 + [6] * 10  # behind_front_min_points: a front seen well enough
+    labels = correct_labels(
+        np.ones(20, bool), extents(*segments, component=component, n_points=points)
+    )
+    np.testing.assert_array_equal(labels, [True] * 10 + [False] * 10)
+
+
+def test_what_is_left_of_a_run_behind_a_rail_is_isolated() -> None:
+    """A fence beyond the rail's end keeps one slice: isolated, it becomes other too (one that
+    touches the rail's end stays in its run)."""
+    fence = (2.6, 2.7, 0.0, 1.8)
+    rail, hedge = rail_and(fence, range(11))
+    assert rail.all() and not hedge.any()
+    rail, hedge = rail_and(fence, range(12))  # two slices beyond the rail: a run of its own
+    np.testing.assert_array_equal(hedge, [False] * 10 + [True] * 2)
 
 
 def test_a_lone_guardrail_segment_becomes_other() -> None:
@@ -270,6 +376,8 @@ def random_extents(seed: int, n: int = 120) -> tuple[np.ndarray, SegmentExtents]
         slices,
         np.column_stack([lo[:, 0], lo[:, 0] + size[:, 0]]),
         np.column_stack([lo[:, 1], lo[:, 1] + size[:, 1]]),
+        rng.integers(0, 4, n),
+        rng.integers(1, 50, n),
     )
 
 
@@ -305,9 +413,57 @@ def test_correction_does_not_depend_on_segment_order(seed: int) -> None:
     labels, ext = random_extents(seed)
     corrected = correct_labels(labels, ext)
     order = np.random.default_rng(seed).permutation(len(labels))
-    shuffled = SegmentExtents(ext.slice_index[order], ext.lateral[order], ext.height[order])
+    shuffled = SegmentExtents(
+        ext.slice_index[order],
+        ext.lateral[order],
+        ext.height[order],
+        ext.component[order],
+        ext.n_points[order],
+    )
     np.testing.assert_array_equal(correct_labels(labels[order], shuffled), corrected[order])
     assert (corrected != labels).any()  # the fixture exercises the rules
+
+
+@pytest.mark.parametrize("seed", [54, 55, 56])
+def test_what_stands_behind_a_rail_equals_a_brute_force_search(seed: int) -> None:
+    from guardrail_core.extract.correct import _behind_a_run, _run_span
+
+    rng = np.random.default_rng(seed)
+    n = 400
+    slices = rng.integers(0, 12, n)
+    lo = rng.uniform(-3.0, 3.0, n)  # some straddle the path: on neither side
+    ext = SegmentExtents(
+        slices,
+        np.column_stack([lo, lo + rng.uniform(0.02, 0.4, n)]),
+        np.column_stack([np.zeros(n), rng.uniform(0.2, 1.2, n)]),
+        rng.integers(0, 5, n),
+        rng.integers(1, 10, n),
+    )
+    labels = rng.random(n) < 0.6
+    params = CorrectionParams()
+    pairs = neighbour_pairs(ext, params)
+    span = _run_span(labels, pairs, ext.slice_index)
+    front = labels & (ext.n_points >= params.behind_front_min_points)
+    front &= span >= params.behind_front_min_slices
+    expected = np.zeros(n, bool)
+    for i in np.flatnonzero(labels):
+        for sign in (1, -1):  # the right side, then the left
+            a = min(sign * ext.lateral[i])
+            if a <= 0:
+                continue
+            for c in set(ext.component.tolist()) - {ext.component[i]}:
+                # The fronts of component c in i's slice, wholly on i's side.
+                ends = [
+                    sorted(sign * ext.lateral[j])
+                    for j in np.flatnonzero(front)
+                    if ext.slice_index[j] == ext.slice_index[i] and ext.component[j] == c
+                ]
+                ends = [d for near, d in ends if near > 0]
+                if ends and params.behind_gap_m < a - max(ends) <= params.behind_max_m:
+                    expected[i] = True
+    got = _behind_a_run(labels, pairs, ext, params)
+    np.testing.assert_array_equal(got, expected)
+    assert 5 < expected.sum() < labels.sum()  # the fixture has both
 
 
 def test_labels_and_extents_of_different_lengths_is_a_named_error() -> None:
@@ -317,26 +473,36 @@ def test_labels_and_extents_of_different_lengths_is_a_named_error() -> None:
 
 @pytest.mark.parametrize("min_run_slices", [1, 2, 3, 4])
 @pytest.mark.parametrize("max_hole_slices", [1, 2])
+@pytest.mark.parametrize("behind_front_min_slices", [1, 4])
 def test_raw_labels_beyond_the_reach_do_not_change_a_corrected_label(
-    min_run_slices: int, max_hole_slices: int
+    min_run_slices: int, max_hole_slices: int, behind_front_min_slices: int
 ) -> None:
     """What lets a processing tile ask the CNN only near the slices it owns."""
-    params = CorrectionParams(min_run_slices=min_run_slices, max_hole_slices=max_hole_slices)
+    params = CorrectionParams(
+        min_run_slices=min_run_slices,
+        max_hole_slices=max_hole_slices,
+        behind_front_min_slices=behind_front_min_slices,
+    )
+    no_behind = CorrectionParams(
+        min_run_slices=min_run_slices, max_hole_slices=max_hole_slices, behind_gap_m=float("inf")
+    )
     reach = correction_reach_slices(params)
     rng = np.random.default_rng(60 + min_run_slices + 10 * max_hole_slices)
     n = 700
     slices = rng.integers(0, 100, n)
-    # Rails, posts and curbs in a narrow band: most segments touch, runs are long.
-    lateral = rng.choice([1.7, 2.0, 2.05], n) + rng.uniform(0.0, 0.05, n)
+    # Rails, posts, curbs and hedges in a narrow band: most segments touch, runs are long.
+    lateral = rng.choice([1.7, 2.0, 2.05, 2.4], n) + rng.uniform(0.0, 0.05, n)
     height = rng.choice([0.0, 0.3, 0.6], n) + rng.uniform(0.0, 0.1, n)
     ext = SegmentExtents(
         slices,
         np.column_stack([lateral, lateral + rng.uniform(0.05, 0.2, n)]),
         np.column_stack([height, height + rng.uniform(0.1, 0.7, n)]),
+        rng.integers(0, 3, n),  # rails, posts and what stands behind them
+        rng.integers(1, 20, n),
     )
     core = (slices >= 40) & (slices < 60)
     near = (slices >= 40 - reach) & (slices < 60 + reach)
-    corrections = 0
+    corrections = behind = 0
     for _ in range(20):
         labels = rng.random(n) < 0.7
         corrected = correct_labels(labels, ext, params)
@@ -344,4 +510,6 @@ def test_raw_labels_beyond_the_reach_do_not_change_a_corrected_label(
         beyond[~near] = rng.random(int((~near).sum())) < 0.7
         np.testing.assert_array_equal(correct_labels(beyond, ext, params)[core], corrected[core])
         corrections += int((corrected[core] != labels[core]).sum())
+        behind += int((corrected != correct_labels(labels, ext, no_behind))[core].sum())
     assert corrections > 20  # the fixture exercises the rules
+    assert behind > 5  # the rule of what stands behind a rail among them

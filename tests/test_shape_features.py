@@ -93,7 +93,13 @@ def test_neighbours_tell_a_short_piece_about_the_long_rail_beside_it() -> None:
     summary = summarise_segments(
         np.zeros((len(station), 3)), np.zeros(len(station)), lateral, height, segments
     )
-    extents = SegmentExtents(segments.slice_index, summary.lateral, summary.height)
+    extents = SegmentExtents(
+        segments.slice_index,
+        summary.lateral,
+        summary.height,
+        segments.component,
+        segments.n_points,
+    )
     intensity = np.full(len(station), 100, np.uint16)
     shape = shape_features(station, lateral, height, intensity, segments, PARAMS.slice_length_m)
     near = neighbour_features(shape, extents, CorrectionParams(touch_distance_m=0.3))

@@ -4,6 +4,11 @@ An isolated guardrail segment becomes "other"; an "other" segment inside a run o
 segments becomes "guardrail" when it lies within their cross-section or is one of the run's
 posts. Neighbours are segments of the same or the next slice along the trajectory whose extents
 beside and above the road touch.
+
+Beyond the paper: a guardrail segment that stands behind a run of guardrail of another object, in
+the same slice and on the same side of the path, becomes other. A hedge, a fence or a bicycle
+rack just behind a rail is cut into slices like the rail, and its crop shows the rail in front of
+it; the paper's streets had nothing behind their rails.
 """
 
 from __future__ import annotations
@@ -88,6 +93,49 @@ class CorrectionParams(StageParams):
         doc="a group of neighbouring guardrail segments spanning fewer slices than this is "
         "isolated and becomes other (the paper: an isolated segment)",
     )
+    behind_gap_m: float = param(
+        0.1,
+        unit="m",
+        ge=0,
+        finite=False,
+        doc="a guardrail segment whose nearest point lies more than this (and at most "
+        "behind_max_m) farther from the path than the guardrail segments of another wireframe "
+        "component in its slice and on its side (in a run of at least behind_front_min_slices) "
+        "becomes other: what stands just behind a rail is a hedge, a fence or a bicycle rack, "
+        "and its crop shows the rail. A rail's own posts and back rail are of its component. "
+        "inf turns the rule off",
+    )
+    behind_max_m: float = param(
+        1.0,
+        unit="m",
+        gt=0,
+        finite=False,
+        doc="what stands farther than this behind a rail may be a barrier of its own: the real "
+        "KITTI motorway's median has a rail for each carriageway, the far one 1.1-1.8 m behind "
+        "the near one with a hedge between",
+    )
+    behind_front_min_slices: int = param(
+        4,
+        ge=1,
+        le=1000,
+        doc="the run in front spans at least this many slices (2 m in 0.5 m slices): a short "
+        "false alarm in front of a rail does not take the rail with it",
+    )
+    behind_front_min_points: int = param(
+        5,
+        ge=1,
+        le=1_000_000,
+        doc="the segment in front holds at least this many points: a multi-beam scanner cuts a "
+        "rail into fragments of a point or two, and one a few centimetres nearer the path "
+        "than the rest is not something the rest stands behind",
+    )
+
+    def check_relations(self) -> None:
+        if np.isfinite(self.behind_gap_m) and self.behind_gap_m >= self.behind_max_m:
+            self.fail(
+                f"behind_gap_m ({self.behind_gap_m}) must be under behind_max_m "
+                f"({self.behind_max_m}), or inf to turn the rule off"
+            )
 
 
 @dataclass(frozen=True)
@@ -97,13 +145,18 @@ class SegmentExtents:
     Attributes
     ----------
     slice_index : (S,) int64, station slice of the segment
-    lateral : (S, 2) float64, metres, smallest and largest lateral offset of its points
+    lateral : (S, 2) float64, metres, smallest and largest lateral offset of its points (signed:
+        the path is at 0)
     height : (S, 2) float64, metres, lowest and highest point above the road
+    component : (S,) int64, the wireframe component (§3.2: one object) the segment was cut from
+    n_points : (S,) int64, how many points it holds
     """
 
     slice_index: np.ndarray
     lateral: np.ndarray
     height: np.ndarray
+    component: np.ndarray
+    n_points: np.ndarray
 
 
 def correction_reach_slices(params: CorrectionParams = CorrectionParams()) -> int:
@@ -112,12 +165,13 @@ def correction_reach_slices(params: CorrectionParams = CorrectionParams()) -> in
     A segment's corrected label depends only on the raw labels of segments within this many
     slices of its own (so a processing tile asks the CNN only for crops that close to the
     slices it owns). Counted step by step through :func:`correct_labels`, ``m`` being
-    ``min_run_slices``: the one-slice fill looks one slice away; whether a run spans ``m``
-    slices is settled within ``m`` slices (a run that leaves them already spans more); the
-    two-slice fill looks a further run test and two slices beyond; the isolation test of the
-    filled labels ``m`` more: ``2 m + 3`` in all.
+    ``min_run_slices`` and ``f`` ``behind_front_min_slices``: the one-slice fill looks one slice
+    away; whether a run spans ``m`` slices is settled within ``m`` slices (a run that leaves them
+    already spans more); the two-slice fill looks a further run test and two slices beyond; the
+    isolation test of the filled labels ``m`` more; whether a run in front spans ``f`` slices
+    ``f`` more; the second isolation test ``m`` more: ``3 m + f + 3`` in all.
     """
-    return 2 * params.min_run_slices + 3
+    return 3 * params.min_run_slices + params.behind_front_min_slices + 3
 
 
 def neighbour_pairs(
@@ -235,6 +289,56 @@ def _fits_between(
     return out
 
 
+def _behind_a_run(
+    labels: np.ndarray,
+    pairs: np.ndarray,
+    extents: SegmentExtents,
+    params: CorrectionParams,
+) -> np.ndarray:
+    """(S,) bool: guardrail segments that stand behind a run of guardrail of another component.
+
+    A front is a guardrail segment wholly on one side of the path, of at least
+    ``behind_front_min_points`` points, in a run spanning at least ``behind_front_min_slices``
+    slices. Guardrail segment ``i``, wholly on one side, stands behind when for some other
+    wireframe component than its own, the fronts of that component in its slice and on its
+    side reach at most to ``i``'s nearest point less ``behind_gap_m``, and at least to it less
+    ``behind_max_m`` (metres from the path): it stands behind that object's slice as a whole.
+    """
+    out = np.zeros(len(labels), bool)
+    if not np.isfinite(params.behind_gap_m):
+        return out
+    slice_index = np.asarray(extents.slice_index, np.int64)
+    lateral = np.asarray(extents.lateral, np.float64)
+    component = np.asarray(extents.component, np.int64)
+    side = np.where(lateral[:, 0] > 0, 1, np.where(lateral[:, 1] < 0, -1, 0))  # 0: on the path
+    nearest = np.where(side > 0, lateral[:, 0], -lateral[:, 1])  # metres from the path
+    farthest = np.where(side > 0, lateral[:, 1], -lateral[:, 0])
+    front = labels & (side != 0) & (np.asarray(extents.n_points) >= params.behind_front_min_points)
+    front &= _run_span(labels, pairs, slice_index) >= params.behind_front_min_slices
+    # The farthest reach of the fronts of each (slice, side, component); then each candidate
+    # against those of its slice and side, of another component than its own.
+    candidates = np.flatnonzero(labels & (side != 0))
+    fronts = np.flatnonzero(front)
+    if len(candidates) == 0 or len(fronts) == 0:
+        return out
+    fronts = fronts[np.lexsort((component[fronts], side[fronts], slice_index[fronts]))]
+    key = np.stack([slice_index[fronts], side[fronts], component[fronts]], axis=1)
+    starts = np.flatnonzero(np.r_[True, (np.diff(key, axis=0) != 0).any(axis=1)])
+    group_far = np.maximum.reduceat(farthest[fronts], starts)
+    group_place = key[starts, 0] * 2 + (key[starts, 1] > 0)  # (slice, side) as one sorted key
+    place = slice_index[candidates] * 2 + (side[candidates] > 0)
+    lo = np.searchsorted(group_place, place, side="left")
+    hi = np.searchsorted(group_place, place, side="right")
+    count = hi - lo
+    who = np.repeat(candidates, count)
+    group = np.repeat(lo - np.cumsum(count) + count, count) + np.arange(count.sum())
+    behind = nearest[who] - group_far[group]
+    hit = (key[starts, 2][group] != component[who]) & (behind > params.behind_gap_m)
+    hit &= behind <= params.behind_max_m
+    out[who[hit]] = True
+    return out
+
+
 def correct_labels(
     labels: np.ndarray,
     extents: SegmentExtents,
@@ -267,6 +371,8 @@ def correct_labels(
         ("slice_index", extents.slice_index),
         ("lateral", extents.lateral),
         ("height", extents.height),
+        ("component", extents.component),
+        ("n_points", extents.n_points),
     ):
         if len(array) != n:
             raise InvalidOptionError(f"correct_labels: {n} labels but {len(array)} rows of {name}")
@@ -307,4 +413,12 @@ def correct_labels(
     # misclassified segment next to a run's end does not leave the end segment isolated.
     span = _run_span(labels, pairs, slice_index)
     labels[labels & (span < params.min_run_slices)] = False
+
+    # What stands behind a run of another object is not guardrail; what it leaves of a run too
+    # short is isolated.
+    behind = _behind_a_run(labels, pairs, extents, params)
+    if behind.any():
+        labels[behind] = False
+        span = _run_span(labels, pairs, slice_index)
+        labels[labels & (span < params.min_run_slices)] = False
     return labels

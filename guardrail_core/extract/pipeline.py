@@ -113,7 +113,13 @@ class Extraction:
 
 
 def segment_extents(segments: Segments, summary: SegmentSummary) -> SegmentExtents:
-    return SegmentExtents(segments.slice_index, summary.lateral, summary.height)
+    return SegmentExtents(
+        segments.slice_index,
+        summary.lateral,
+        summary.height,
+        segments.component,
+        segments.n_points,
+    )
 
 
 def slice_drive(

@@ -463,7 +463,13 @@ def predict_run(
     )
     if correction is None:
         correction = _run_correction(run)
-    extents = SegmentExtents(segments["slice_index"], segments["lateral"], segments["height"])
+    extents = SegmentExtents(
+        segments["slice_index"],
+        segments["lateral"],
+        segments["height"],
+        segments["component"],
+        segments["n_points"],
+    )
     label = correct_labels(raw_label, extents, correction, probability)
     out = {
         "crop_probability": crop_probability,
@@ -621,7 +627,8 @@ def _run_classify(run: Run) -> ClassifyParams:
 
 def _run_correction(run: Run) -> CorrectionParams:
     """The run's own correction rules; a run from before the fill floor filled by position
-    alone."""
-    stored = {"fill_min_probability": 0.0, **(run.info.params.get("correction") or {})}
+    alone, and one from before the rule of what stands behind a rail kept it."""
+    before = {"fill_min_probability": 0.0, "behind_gap_m": float("inf")}
+    stored = {**before, **(run.info.params.get("correction") or {})}
     known = CorrectionParams.__dataclass_fields__
     return CorrectionParams(**{k: v for k, v in stored.items() if k in known})
