@@ -471,6 +471,21 @@ def test_labels_and_extents_of_different_lengths_is_a_named_error() -> None:
         correct_labels(np.ones(5, bool), extents(*run(range(3))))
 
 
+def test_the_reach_covers_a_run_in_front_made_long_by_fills() -> None:
+    """A hedge behind a rail's first slice; the rail's run reaches 8 slices (the front's
+    minimum here) only if the raw label 8 slices away lets a hole before it be filled: rail
+    0-2, a hole of two, 5-6, a hole of one, 8. The rules without the rule behind a rail reach
+    2 m + 3 = 7 slices."""
+    params = CorrectionParams(behind_front_min_slices=8)
+    segments = run(range(9)) + [(0, HEDGE)]
+    ext = extents(*segments, component=[0] * 9 + [1])
+    raw = np.array([1, 1, 1, 0, 0, 1, 1, 0, 1, 1], bool)
+    assert not correct_labels(raw, ext, params)[9]  # the run spans 0-8: the hedge is behind it
+    raw[8] = False
+    assert correct_labels(raw, ext, params)[9]  # the run spans 0-6: too short to stand behind
+    assert 8 <= correction_reach_slices(params)
+
+
 @pytest.mark.parametrize("min_run_slices", [1, 2, 3, 4])
 @pytest.mark.parametrize("max_hole_slices", [1, 2])
 @pytest.mark.parametrize("behind_front_min_slices", [1, 4])
