@@ -14,6 +14,7 @@ import pytest
 from guardrail_core.errors import InvalidOptionError, TrainingDataError
 from guardrail_core.extract import training as training_module
 from guardrail_core.extract.classify import EMBEDDING_DIM, ClassifierParams, held_out_mask
+from guardrail_core.extract.correct import CorrectionParams, SegmentExtents, correct_labels
 from guardrail_core.extract.crops import CROP_OK
 from guardrail_core.extract.model_folder import load_model
 from guardrail_core.extract.segment_head import SegmentHeadParams
@@ -433,6 +434,27 @@ def test_predict_run_with_the_runs_model_reproduces_the_run(
         assert np.array_equal(np.isnan(predicted[name]), np.isnan(run.segments[name]))
     assert np.array_equal(predicted["raw_label"], run.segments["raw_label"])
     assert np.array_equal(predicted["label"], run.segments["label"])
+
+
+def test_predict_run_keeps_the_correction_rules_of_a_run_from_before_them(
+    run_copy: Path, model_path: Path
+) -> None:
+    """A run whose run.json predates the fill floor and the rule of what stands behind a rail
+    is re-predicted without them (filling by position alone, keeping what stands behind)."""
+    info_path = run_copy / "run.json"
+    info = json.loads(info_path.read_text())
+    for name in ("fill_min_probability", "behind_gap_m", "behind_max_m"):
+        info["params"]["correction"].pop(name)
+    info_path.write_text(json.dumps(info))
+    run = load_run(run_copy)
+    predicted = predict_run(run, load_model(model_path))
+    seg = run.segments
+    extents = SegmentExtents(
+        seg["slice_index"], seg["lateral"], seg["height"], seg["component"], seg["n_points"]
+    )
+    old = CorrectionParams(fill_min_probability=0.0, behind_gap_m=float("inf"))
+    expected = correct_labels(predicted["raw_label"], extents, old, predicted["probability"])
+    np.testing.assert_array_equal(predicted["label"], expected)
 
 
 def test_write_predictions_replaces_the_runs_predictions(
