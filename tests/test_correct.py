@@ -101,6 +101,18 @@ def test_what_stands_behind_a_rail_becomes_other() -> None:
     np.testing.assert_array_equal(labels, [True] * 10 + [False] * 10)
 
 
+def test_a_hedge_touching_the_back_of_a_rail_becomes_other() -> None:
+    """A hedge cut from the back of a rail (``SegmentParams.front_layer_m``): no gap between
+    them, but it spans 0.4 m or more across (``behind_wide_m``); a narrow thing touching the
+    rail's back, or the rule for wide things off, keeps it."""
+    touching = (2.1, 2.8, 0.1, 1.3)
+    rail, hedge = rail_and(touching)
+    assert rail.all() and not hedge.any()
+    for narrow, params in (((2.1, 2.45, 0.1, 1.3), {}), (touching, {"behind_wide_m": np.inf})):
+        rail, other = rail_and(narrow, **params)
+        assert rail.all() and other.all()
+
+
 def test_a_rails_own_parts_behind_it_stay_guardrail() -> None:
     """A post behind a beam, or the back rail of a double-sided barrier, is of its component."""
     segments = run(range(10)) + run(range(10), HEDGE)
@@ -434,7 +446,7 @@ def test_what_stands_behind_a_rail_equals_a_brute_force_search(seed: int) -> Non
     lo = rng.uniform(-3.0, 3.0, n)  # some straddle the path: on neither side
     ext = SegmentExtents(
         slices,
-        np.column_stack([lo, lo + rng.uniform(0.02, 0.4, n)]),
+        np.column_stack([lo, lo + rng.uniform(0.02, 0.6, n)]),  # some behind_wide_m wide
         np.column_stack([np.zeros(n), rng.uniform(0.2, 1.2, n)]),
         rng.integers(0, 5, n),
         rng.integers(1, 10, n),
@@ -459,11 +471,19 @@ def test_what_stands_behind_a_rail_equals_a_brute_force_search(seed: int) -> Non
                     if ext.slice_index[j] == ext.slice_index[i] and ext.component[j] == c
                 ]
                 ends = [d for near, d in ends if near > 0]
-                if ends and params.behind_gap_m < a - max(ends) <= params.behind_max_m:
+                if not ends:
+                    continue
+                behind = a - max(ends)
+                wide = ext.lateral[i][1] - ext.lateral[i][0] >= params.behind_wide_m
+                if (params.behind_gap_m < behind or (wide and behind >= 0)) and (
+                    behind <= params.behind_max_m
+                ):
                     expected[i] = True
     got = _behind_a_run(labels, pairs, ext, params)
     np.testing.assert_array_equal(got, expected)
     assert 5 < expected.sum() < labels.sum()  # the fixture has both
+    narrow_only = CorrectionParams(behind_wide_m=np.inf)
+    assert (_behind_a_run(labels, pairs, ext, narrow_only) != got).any()  # and wide ones
 
 
 def test_labels_and_extents_of_different_lengths_is_a_named_error() -> None:

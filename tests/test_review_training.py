@@ -443,7 +443,7 @@ def test_predict_run_keeps_the_correction_rules_of_a_run_from_before_them(
     is re-predicted without them (filling by position alone, keeping what stands behind)."""
     info_path = run_copy / "run.json"
     info = json.loads(info_path.read_text())
-    for name in ("fill_min_probability", "behind_gap_m", "behind_max_m"):
+    for name in ("fill_min_probability", "behind_gap_m", "behind_max_m", "behind_wide_m"):
         info["params"]["correction"].pop(name)
     info_path.write_text(json.dumps(info))
     run = load_run(run_copy)
@@ -455,6 +455,20 @@ def test_predict_run_keeps_the_correction_rules_of_a_run_from_before_them(
     old = CorrectionParams(fill_min_probability=0.0, behind_gap_m=float("inf"))
     expected = correct_labels(predicted["raw_label"], extents, old, predicted["probability"])
     np.testing.assert_array_equal(predicted["label"], expected)
+
+
+def test_a_run_from_before_the_rule_for_wide_segments_keeps_them(run_copy: Path) -> None:
+    """A run whose correction parameters have the rule of what stands behind a rail but not
+    ``behind_wide_m`` is re-predicted with wide segments asked for the gap like the rest."""
+    from guardrail_core.review.training import _run_correction
+
+    assert _run_correction(load_run(run_copy)).behind_wide_m == CorrectionParams().behind_wide_m
+    info_path = run_copy / "run.json"
+    info = json.loads(info_path.read_text())
+    info["params"]["correction"].pop("behind_wide_m")
+    info_path.write_text(json.dumps(info))
+    params = _run_correction(load_run(run_copy))
+    assert params == CorrectionParams(behind_wide_m=float("inf"))
 
 
 def test_write_predictions_replaces_the_runs_predictions(

@@ -114,6 +114,17 @@ class CorrectionParams(StageParams):
         "KITTI motorway's median has a rail for each carriageway, the far one 1.1-1.8 m behind "
         "the near one with a hedge between",
     )
+    behind_wide_m: float = param(
+        0.4,
+        unit="m",
+        gt=0,
+        finite=False,
+        doc="a guardrail segment spanning at least this much across the path stands behind a "
+        "run of another component with no gap at all: a hedge or a bush that touches the back "
+        "of a rail (SegmentParams.front_layer_m cuts it from the rail as a component of its "
+        "own). A rail's slice, posts included, is narrower; inf asks every segment for "
+        "behind_gap_m",
+    )
     behind_front_min_slices: int = param(
         4,
         ge=1,
@@ -301,8 +312,9 @@ def _behind_a_run(
     ``behind_front_min_points`` points, in a run spanning at least ``behind_front_min_slices``
     slices. Guardrail segment ``i``, wholly on one side, stands behind when for some other
     wireframe component than its own, the fronts of that component in its slice and on its
-    side reach at most to ``i``'s nearest point less ``behind_gap_m``, and at least to it less
-    ``behind_max_m`` (metres from the path): it stands behind that object's slice as a whole.
+    side reach at most to ``i``'s nearest point less ``behind_gap_m`` (less nothing when ``i``
+    spans ``behind_wide_m`` or more across), and at least to it less ``behind_max_m`` (metres
+    from the path): it stands behind that object's slice as a whole.
     """
     out = np.zeros(len(labels), bool)
     if not np.isfinite(params.behind_gap_m):
@@ -333,8 +345,9 @@ def _behind_a_run(
     who = np.repeat(candidates, count)
     group = np.repeat(lo - np.cumsum(count) + count, count) + np.arange(count.sum())
     behind = nearest[who] - group_far[group]
-    hit = (key[starts, 2][group] != component[who]) & (behind > params.behind_gap_m)
-    hit &= behind <= params.behind_max_m
+    wide = farthest - nearest >= params.behind_wide_m
+    gap = (behind > params.behind_gap_m) | (wide[who] & (behind >= 0.0))
+    hit = (key[starts, 2][group] != component[who]) & gap & (behind <= params.behind_max_m)
     out[who[hit]] = True
     return out
 

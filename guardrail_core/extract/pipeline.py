@@ -160,7 +160,9 @@ def slice_drive(
         component = wireframe_components(points.xyz, kept, lattice, params.segments)
         component = absorb_fragments(points.xyz, component, params.segments)
     with timer.stage("slices", points=int(kept.sum())):
-        segments = slice_components(component, track.station, params.segments, track.lateral)
+        segments = slice_components(
+            component, track.station, params.segments, track.lateral, track.height
+        )
         summary = summarise_segments(
             points.xyz, points.gps_time, track.lateral, track.height, segments
         )

@@ -128,6 +128,43 @@ class SegmentParams(StageParams):
         doc="a gap cuts only beside a piece at least this wide across (a hedge, a bush): a post "
         "0.1-0.3 m behind its beam, or the scattered hits of a sparse scan's post, stay with it",
     )
+    front_layer_m: float = param(
+        0.08,
+        unit="m",
+        ge=0,
+        le=100,
+        doc="a slice (or piece) wider than gap_width_m with no gap in it is also cut this far "
+        "behind its front (the side nearest the trajectory) when what lies behind spans "
+        "gap_piece_m or more across: a hedge or a bush that touches the back of a rail. The part "
+        "behind becomes a component of its own (the wireframe joined two objects); 0 turns this "
+        "off",
+    )
+    front_min_height_m: float = param(
+        0.25,
+        unit="m",
+        ge=0,
+        le=100,
+        doc="a slice is cut behind its front (front_layer_m) only where the front spans at least "
+        "this much in height: a rail's face does (a W-beam is 0.31 m tall, a pipe rail's pipes "
+        "and posts more), the bulge of a hedge or a car's flank nearest the road is a thinner "
+        "band",
+    )
+    front_min_points: int = param(
+        20,
+        ge=1,
+        le=1_000_000,
+        doc="a slice is cut behind its front (front_layer_m) only where the front holds at "
+        "least this many points: a sparse scan's few hits on the near side of a bush are too "
+        "little shape to judge apart from the rest",
+    )
+    front_behind_ratio: float = param(
+        2.0,
+        gt=0,
+        le=1000,
+        doc="a slice is cut behind its front (front_layer_m) only where what lies behind holds "
+        "at least this many times the points of the front: a hedge is bigger than the rail it "
+        "backs, while a deep beam's back half and its post hold fewer points than its face",
+    )
 
 
 @dataclass(frozen=True)
@@ -139,8 +176,10 @@ class Segments:
     Attributes
     ----------
     point_segment : (N,) int32, segment of every input point, -1 for points not kept
-    point_component : (N,) int32, connected component of every point, -1 for points not kept
-    component : (S,) int32, the component each segment was cut from
+    point_component : (N,) int32, connected component of every point, -1 for points not kept;
+        what was cut from behind a front (``SegmentParams.front_layer_m``) is a component of its
+        own, numbered C + c for component c of the C that the wireframe made
+    component : (S,) int32, the component each segment was cut from (as ``point_component``)
     slice_index : (S,) int64, station slice: the segment lies in
         [slice_index * slice_length_m, (slice_index + 1) * slice_length_m) along the trajectory
     n_points : (S,) int64
@@ -310,6 +349,7 @@ def slice_components(
     station: np.ndarray,
     params: SegmentParams = SegmentParams(),
     lateral: np.ndarray | None = None,
+    height: np.ndarray | None = None,
 ) -> Segments:
     """Cut components into segments by planes perpendicular to the trajectory.
 
@@ -320,6 +360,8 @@ def slice_components(
     params : slice length, and how wide slices are cut across
     lateral : (N,) float64, metres left of the trajectory; with it, slices wider than
         ``params.max_width_m`` are cut where their points thin out across the trajectory
+    height : (N,) float64, metres above the road; with it and ``lateral``, what lies behind
+        a wide slice's front is cut from it (``params.front_layer_m``)
 
     References
     ----------
@@ -346,8 +388,8 @@ def slice_components(
     n_components = int(component[kept].max()) + 1
     key = (slices - first_slice) * n_components + component[kept]
     unique_keys, segment_of_kept = np.unique(key, return_inverse=True)
-    if lateral is not None and (params.max_width_m > 0 or params.gap_width_m > 0):
-        across = np.asarray(lateral, np.float64)[kept]
+    across = None if lateral is None else np.asarray(lateral, np.float64)[kept]
+    if across is not None and (params.max_width_m > 0 or params.gap_width_m > 0):
         bounds = _lateral_bounds(segment_of_kept, across)
         piece = _lateral_pieces(segment_of_kept, across, bounds, params)
         gaps = _gap_pieces(segment_of_kept, across, bounds, params)
@@ -359,13 +401,25 @@ def slice_components(
                 segment_of_kept * n_pieces + piece, return_inverse=True
             )
             unique_keys = unique_keys[pairs // n_pieces]
+    segment_component = unique_keys % n_components
+    point_component = component.astype(np.int32)
+    if height is not None and across is not None and params.front_layer_m > 0:
+        up = np.asarray(height, np.float64)[kept]
+        behind = _behind_front(segment_of_kept, across, up, params)
+        if behind.any():
+            # What lies behind a front is another object: a component of its own (one for each
+            # component it was cut from), so label correction tells the two apart.
+            pairs, segment_of_kept = np.unique(segment_of_kept * 2 + behind, return_inverse=True)
+            unique_keys = unique_keys[pairs // 2]
+            segment_component = unique_keys % n_components + n_components * (pairs % 2)
+            point_component[kept[behind]] += n_components
     point_segment[kept] = segment_of_kept
     order_in_kept = np.argsort(segment_of_kept, kind="stable")
     n_points = np.bincount(segment_of_kept, minlength=len(unique_keys)).astype(np.int64)
     return Segments(
         point_segment=point_segment,
-        point_component=component.astype(np.int32),
-        component=(unique_keys % n_components).astype(np.int32),
+        point_component=point_component,
+        component=segment_component.astype(np.int32),
         slice_index=unique_keys // n_components + first_slice,
         n_points=n_points,
         order=kept[order_in_kept],
@@ -457,6 +511,71 @@ def _gap_pieces(
     count = np.cumsum(cut)
     piece[order] = count - np.maximum.accumulate(np.where(first, count, 0))
     return piece
+
+
+def _behind_front(
+    segment: np.ndarray, lateral: np.ndarray, height: np.ndarray, params: SegmentParams
+) -> np.ndarray:
+    """(K,) bool: the points of wide slices that lie ``front_layer_m`` or more behind their
+    slice's front, where those points span ``gap_piece_m`` or more across and hold
+    ``front_behind_ratio`` times the points in front of them or more, and where the points in
+    front, at least ``front_min_points`` of them, span ``front_min_height_m`` or more in height.
+
+    A slice is wide when it spans more than ``gap_width_m`` across. Its front lies in its bin
+    (``width_bin_m``) nearest the trajectory (on the slice's side) of those that hold more than
+    ``valley_share`` of the fullest bin's points, at the point ``valley_share`` of the way into
+    that bin's points by depth: a sparse scan's clutter in front of a rail does not move it.
+    """
+    behind = np.zeros(len(segment), bool)
+    if len(segment) == 0:
+        return behind
+    n_seg = int(segment.max()) + 1
+    side = np.where(np.bincount(segment, weights=lateral, minlength=n_seg) < 0, -1.0, 1.0)
+    depth = lateral * side[segment]  # metres from the trajectory on the slice's side
+    low, high = _lateral_bounds(segment, depth)
+    members = np.flatnonzero((high - low > params.gap_width_m)[segment])
+    if len(members) == 0:
+        return behind
+    s, d = segment[members], depth[members]
+    # Every wide slice's bins laid end to end, as in _lateral_pieces.
+    n_bins = np.zeros(n_seg, np.int64)
+    wide = np.unique(s)
+    n_bins[wide] = ((high[wide] - low[wide]) / params.width_bin_m).astype(np.int64) + 1
+    first_bin = np.concatenate([[0], np.cumsum(n_bins)[:-1]])
+    cell = first_bin[s] + ((d - low[s]) / params.width_bin_m).astype(np.int64)
+    counts = np.bincount(cell, minlength=int(n_bins.sum()))
+    owner = np.repeat(np.arange(n_seg), n_bins)
+    fullest = np.zeros(n_seg, np.int64)
+    np.maximum.at(fullest, owner, counts)
+    dense = counts > params.valley_share * fullest[owner]
+    # The nearest dense bin of each slice, and the point valley_share of the way into it.
+    nearest = np.full(n_seg, np.iinfo(np.int64).max)
+    np.minimum.at(nearest, s[dense[cell]], cell[dense[cell]])
+    mine = np.flatnonzero(cell == nearest[s])
+    mine = mine[np.lexsort((d[mine], s[mine]))]
+    starts = np.flatnonzero(np.concatenate([[True], s[mine][1:] != s[mine][:-1]]))
+    size = np.diff(np.append(starts, len(mine)))
+    rank = starts + (params.valley_share * (size - 1)).astype(np.int64)
+    front = np.full(n_seg, np.inf)
+    front[s[mine][starts]] = d[mine][rank]
+    back = d - front[s] >= params.front_layer_m
+    # The nearest point behind each slice's front layer, and how many lie behind and before.
+    back_low = np.full(n_seg, np.inf)
+    np.minimum.at(back_low, s[back], d[back])
+    n_back = np.bincount(s[back], minlength=n_seg)
+    n_front = np.bincount(s[~back], minlength=n_seg)
+    top = np.full(n_seg, -np.inf)
+    bottom = np.full(n_seg, np.inf)
+    np.maximum.at(top, s[~back], height[members][~back])
+    np.minimum.at(bottom, s[~back], height[members][~back])
+    cut = (
+        (high - back_low >= params.gap_piece_m - _ROUNDING_M)
+        & (n_back >= params.front_behind_ratio * n_front)
+        & (n_front >= params.front_min_points)
+        & (top - bottom >= params.front_min_height_m)
+    )
+    behind[members] = back & cut[s]
+    return behind
 
 
 def _lateral_bounds(segment: np.ndarray, lateral: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

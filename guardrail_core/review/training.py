@@ -627,8 +627,13 @@ def _run_classify(run: Run) -> ClassifyParams:
 
 def _run_correction(run: Run) -> CorrectionParams:
     """The run's own correction rules; a run from before the fill floor filled by position
-    alone, and one from before the rule of what stands behind a rail kept it."""
-    before = {"fill_min_probability": 0.0, "behind_gap_m": float("inf")}
+    alone, one from before the rule of what stands behind a rail kept it, and one from before
+    wide segments touching a rail's back kept them."""
+    before = {
+        "fill_min_probability": 0.0,
+        "behind_gap_m": float("inf"),
+        "behind_wide_m": float("inf"),
+    }
     stored = {**before, **(run.info.params.get("correction") or {})}
     known = CorrectionParams.__dataclass_fields__
     return CorrectionParams(**{k: v for k, v in stored.items() if k in known})
