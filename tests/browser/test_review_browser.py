@@ -383,7 +383,10 @@ def _point_to_click(
     drive_path: Path, run_path: Path, image: int, not_segment: int
 ) -> tuple[int, tuple[int, int]]:
     """A segment other than ``not_segment`` on camera image ``image`` and the pixel of its point
-    nearest the camera, where no other segment's point lies within the pick radius."""
+    nearest the camera, where no other segment's point lies within the pick radius, and at
+    least ``edge`` pixels inside the image: the page shows the image scaled, its bottom right
+    corner under the selection panel, and a click meant for pixel (1022, 766) of a 1024 x 768
+    image asked for (1024, 768)."""
     import numpy as np
 
     from app.image_overlay import PICK_RADIUS_PX, ImageOverlay
@@ -397,12 +400,16 @@ def _point_to_click(
     source = open_drive(drive_path)
     tiles = RunTiles(source, folder, folder.segments()["time"])
     found = ImageOverlay(source, tiles, params).points(image)
+    camera = source.cameras[source.images[image].camera]
+    edge = 8
     segments, counts = np.unique(found.segment[found.segment >= 0], return_counts=True)
     for t in segments[counts >= 20]:
         if t == not_segment:
             continue
         mine = np.flatnonzero(found.segment == t)
         pixel = found.pixel[mine[np.argmin(found.depth[mine])]]
+        if not (edge <= pixel[0] < camera.width - edge and edge <= pixel[1] < camera.height - edge):
+            continue
         near = ((found.pixel - pixel) ** 2).sum(axis=1) <= (PICK_RADIUS_PX + 3) ** 2
         if not (near & (found.segment != t) & (found.segment >= 0)).any():
             return int(t), (int(pixel[0]), int(pixel[1]))
