@@ -444,17 +444,9 @@ def _lateral_pieces(
     wide = np.flatnonzero(high - low > params.max_width_m)
     if params.max_width_m <= 0 or len(wide) == 0:
         return piece
-    n_seg = len(low)
-    # Every wide slice's bins laid end to end: cell = its first bin + the point's bin.
-    n_bins = np.zeros(n_seg, np.int64)
-    n_bins[wide] = ((high[wide] - low[wide]) / params.width_bin_m).astype(np.int64) + 1
-    first_bin = np.concatenate([[0], np.cumsum(n_bins)[:-1]])
-    members = np.flatnonzero(n_bins[segment] > 0)
-    s = segment[members]
-    cell = first_bin[s] + ((lateral[members] - low[s]) / params.width_bin_m).astype(np.int64)
-    total = int(n_bins.sum())
-    counts = np.bincount(cell, minlength=total)
-    owner = np.repeat(np.arange(n_seg), n_bins)
+    bins = _bins_across(segment, lateral, bounds, wide, params.width_bin_m)
+    n_bins, first_bin, members, cell, counts, owner = bins
+    total = len(counts)
     fullest = np.maximum.reduceat(counts, first_bin[wide])
     valley = counts <= params.valley_share * np.repeat(fullest, n_bins[wide])
     opens = np.ones(total, bool)  # a slice's first bin opens its first piece
@@ -471,6 +463,31 @@ def _lateral_pieces(
     run = runs(valley)
     piece[members] = (run - run[first_bin[owner]])[cell]
     return piece
+
+
+def _bins_across(
+    segment: np.ndarray,
+    across: np.ndarray,
+    bounds: tuple[np.ndarray, np.ndarray],
+    wide: np.ndarray,
+    bin_m: float,
+) -> tuple[np.ndarray, ...]:
+    """The slices ``wide`` (W,) binned across (``bin_m``), their bins laid end to end.
+
+    Returns ``n_bins`` and ``first_bin`` (S,) (0 bins for the other slices), ``members`` (M,)
+    the points of those slices, ``cell`` (M,) the bin of each (its slice's first bin + its
+    bin), ``counts`` (B,) the points of every bin and ``owner`` (B,) its slice.
+    """
+    low, high = bounds
+    n_bins = np.zeros(len(low), np.int64)
+    n_bins[wide] = ((high[wide] - low[wide]) / bin_m).astype(np.int64) + 1
+    first_bin = np.concatenate([[0], np.cumsum(n_bins)[:-1]])
+    members = np.flatnonzero(n_bins[segment] > 0)
+    s = segment[members]
+    cell = first_bin[s] + ((across[members] - low[s]) / bin_m).astype(np.int64)
+    counts = np.bincount(cell, minlength=int(n_bins.sum()))
+    owner = np.repeat(np.arange(len(low)), n_bins)
+    return n_bins, first_bin, members, cell, counts, owner
 
 
 def _gap_pieces(
@@ -537,14 +554,10 @@ def _behind_front(
     if len(members) == 0:
         return behind
     s, d = segment[members], depth[members]
-    # Every wide slice's bins laid end to end, as in _lateral_pieces.
-    n_bins = np.zeros(n_seg, np.int64)
     wide = np.unique(s)
-    n_bins[wide] = ((high[wide] - low[wide]) / params.width_bin_m).astype(np.int64) + 1
-    first_bin = np.concatenate([[0], np.cumsum(n_bins)[:-1]])
-    cell = first_bin[s] + ((d - low[s]) / params.width_bin_m).astype(np.int64)
-    counts = np.bincount(cell, minlength=int(n_bins.sum()))
-    owner = np.repeat(np.arange(n_seg), n_bins)
+    _, _, _, cell, counts, owner = _bins_across(
+        segment, depth, (low, high), wide, params.width_bin_m
+    )
     fullest = np.zeros(n_seg, np.int64)
     np.maximum.at(fullest, owner, counts)
     dense = counts > params.valley_share * fullest[owner]
@@ -566,8 +579,9 @@ def _behind_front(
     n_front = np.bincount(s[~back], minlength=n_seg)
     top = np.full(n_seg, -np.inf)
     bottom = np.full(n_seg, np.inf)
-    np.maximum.at(top, s[~back], height[members][~back])
-    np.minimum.at(bottom, s[~back], height[members][~back])
+    front_height = height[members][~back]
+    np.maximum.at(top, s[~back], front_height)
+    np.minimum.at(bottom, s[~back], front_height)
     cut = (
         (high - back_low >= params.gap_piece_m - _ROUNDING_M)
         & (n_back >= params.front_behind_ratio * n_front)
