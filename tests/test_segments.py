@@ -438,6 +438,39 @@ def test_no_reach_or_nothing_near_leaves_components_as_they_are(reach: float) ->
     np.testing.assert_array_equal(merged, component)
 
 
+def _post_and_foot() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A post (60 points, 0.3-1.0 m above the road) and, 0.15 m below it, its foot with the
+    sidewalk around it (20 points, 0.05-0.13 m): two components, as road removal leaves them."""
+    post = np.stack([np.zeros(60), np.zeros(60), np.linspace(0.3, 1.0, 60)], axis=1)
+    foot = np.stack(
+        [np.linspace(-0.1, 0.1, 20), np.full(20, -0.05), np.linspace(0.05, 0.13, 20)], axis=1
+    )
+    xyz = np.concatenate([post, foot])
+    return xyz, np.repeat([0, 1], [60, 20]), xyz[:, 2]
+
+
+def test_a_post_foot_cut_off_near_the_ground_joins_its_post() -> None:
+    xyz, component, height = _post_and_foot()
+    params = SegmentParams(fragment_points=10, ground_fragment_points=30)
+    np.testing.assert_array_equal(absorb_fragments(xyz, component, params, height), 0)
+    # Without heights, or with the rule off, 20 points are no fragment.
+    np.testing.assert_array_equal(absorb_fragments(xyz, component, params), component)
+    off = SegmentParams(fragment_points=10, ground_fragment_points=0)
+    np.testing.assert_array_equal(absorb_fragments(xyz, component, off, height), component)
+
+
+@pytest.mark.parametrize(("raised_m", "points"), [(0.2, 30), (0.0, 20)])
+def test_a_ground_fragment_reaches_no_higher_and_holds_fewer_points(
+    raised_m: float, points: int
+) -> None:
+    """Raised 0.2 m (top 0.33 m: a low rail's reach), or of 20 points against a limit of 20,
+    the piece stays a component of its own."""
+    xyz, component, height = _post_and_foot()
+    height = height + np.where(component == 1, raised_m, 0.0)
+    params = SegmentParams(fragment_points=10, ground_fragment_points=points)
+    np.testing.assert_array_equal(absorb_fragments(xyz, component, params, height), component)
+
+
 def test_fragments_with_nothing_large_or_nothing_kept() -> None:
     xyz = np.zeros((3, 3))
     np.testing.assert_array_equal(

@@ -158,7 +158,7 @@ def slice_drive(
         kept = status == 0
     with timer.stage("components", points=int(kept.sum())):
         component = wireframe_components(points.xyz, kept, lattice, params.segments)
-        component = absorb_fragments(points.xyz, component, params.segments)
+        component = absorb_fragments(points.xyz, component, params.segments, track.height)
     with timer.stage("slices", points=int(kept.sum())):
         segments = slice_components(
             component, track.station, params.segments, track.lateral, track.height

@@ -62,6 +62,26 @@ class SegmentParams(StageParams):
         doc="a fragment joins the larger component that comes closest to it within this reach "
         "(0: fragments stay apart, as in the paper)",
     )
+    ground_fragment_points: int = param(
+        30,
+        ge=0,
+        le=1_000_000,
+        doc="a component of fewer points that lies wholly below ground_fragment_top_m is a "
+        "fragment too: where road removal takes the band of a far post just above the "
+        "sidewalk, the post's foot and the sidewalk around it form a component of their own "
+        "(10-20 points, half of them sidewalk), cut off from the post. Joined to the post it "
+        "belongs to; alone it is a segment of the post that the classifier calls guardrail or "
+        "other by a coin's toss. 0: only fragment_points counts",
+    )
+    ground_fragment_top_m: float = param(
+        0.25,
+        unit="m",
+        ge=0,
+        le=10,
+        doc="metres above the road under which a component's highest point lies for "
+        "ground_fragment_points (RoadParams.height_tolerance_m: the band where road removal "
+        "judges points as ground); no guardrail's rail runs that low",
+    )
     slice_length_m: float = param(
         0.5,
         unit="m",
@@ -298,21 +318,27 @@ def _renumber(labels: np.ndarray, kept: np.ndarray) -> np.ndarray:
 
 
 def absorb_fragments(
-    xyz: np.ndarray, component: np.ndarray, params: SegmentParams = SegmentParams()
+    xyz: np.ndarray,
+    component: np.ndarray,
+    params: SegmentParams = SegmentParams(),
+    height: np.ndarray | None = None,
 ) -> np.ndarray:
     """Join each small component to the nearest larger one within reach.
 
     The wireframe leaves a thin pipe's sparse hits as many components of a few points each; as
     their own 0.5 m segments they are too small to crop and classify, though they lie beside the
-    rail they belong to. A fragment (fewer than ``fragment_points`` points) joins the component
-    of at least that many points that comes closest to any of its points, if within
-    ``fragment_reach_m``; otherwise it stays as it is.
+    rail they belong to. A fragment (fewer than ``fragment_points`` points, or with ``height``
+    fewer than ``ground_fragment_points`` all below ``ground_fragment_top_m``: a far post's
+    foot cut off from it with the sidewalk around it) joins the component that is no fragment
+    and comes closest to any of its points, if within ``fragment_reach_m``; otherwise it stays
+    as it is.
 
     Parameters
     ----------
     xyz : (N, 3) float64, metres
     component : (N,) int, component of every point from :func:`wireframe_components`, -1 for
         points not kept
+    height : (N,) float64, metres above the road, or None (no ground fragments)
 
     Returns
     -------
@@ -323,7 +349,12 @@ def absorb_fragments(
     if params.fragment_reach_m <= 0 or not kept.any():
         return component.astype(np.int32)
     size = np.bincount(component[kept])
-    small = kept & (size[np.maximum(component, 0)] < params.fragment_points)
+    is_fragment = size < params.fragment_points
+    if height is not None:
+        top = np.full(len(size), -np.inf)
+        np.maximum.at(top, component[kept], np.asarray(height, np.float64)[kept])
+        is_fragment |= (size < params.ground_fragment_points) & (top < params.ground_fragment_top_m)
+    small = kept & is_fragment[np.maximum(component, 0)]
     large = np.flatnonzero(kept & ~small)
     fragment = np.flatnonzero(small)
     merged = component.copy()
