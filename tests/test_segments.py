@@ -439,7 +439,7 @@ def test_no_reach_or_nothing_near_leaves_components_as_they_are(reach: float) ->
 
 
 def _post_and_foot() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """A post (60 points, 0.3-1.0 m above the road) and, 0.15 m below it, its foot with the
+    """A post (60 points, 0.3-1.0 m above the road) and, 0.17 m below it, its foot with the
     sidewalk around it (20 points, 0.05-0.13 m): two components, as road removal leaves them."""
     post = np.stack([np.zeros(60), np.zeros(60), np.linspace(0.3, 1.0, 60)], axis=1)
     foot = np.stack(

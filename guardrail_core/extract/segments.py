@@ -69,9 +69,9 @@ class SegmentParams(StageParams):
         doc="a component of fewer points that lies wholly below ground_fragment_top_m is a "
         "fragment too: where road removal takes the band of a far post just above the "
         "sidewalk, the post's foot and the sidewalk around it form a component of their own "
-        "(10-20 points, half of them sidewalk), cut off from the post. Joined to the post it "
-        "belongs to; alone it is a segment of the post that the classifier calls guardrail or "
-        "other by a coin's toss. 0: only fragment_points counts",
+        "(5-20 points, half of them sidewalk), cut off from the post. Joined to the post it "
+        "belongs to; alone it is a segment that the classifier calls guardrail or other by a "
+        "coin's toss. 0: only fragment_points counts",
     )
     ground_fragment_top_m: float = param(
         0.25,
@@ -80,7 +80,8 @@ class SegmentParams(StageParams):
         le=10,
         doc="metres above the road under which a component's highest point lies for "
         "ground_fragment_points (RoadParams.height_tolerance_m: the band where road removal "
-        "judges points as ground); no guardrail's rail runs that low",
+        "judges points as ground). A bottom rail 0.15-0.2 m high has its few hits there too; "
+        "they join its posts or balusters, as a thin pipe's fragments do",
     )
     slice_length_m: float = param(
         0.5,
