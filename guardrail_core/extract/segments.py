@@ -70,8 +70,8 @@ class SegmentParams(StageParams):
         "fragment too: where road removal takes the band of a far post just above the "
         "sidewalk, the post's foot and the sidewalk around it form a component of their own "
         "(5-20 points, half of them sidewalk), cut off from the post. Joined to the post it "
-        "belongs to; alone it is a segment that the classifier calls guardrail or other by a "
-        "coin's toss. 0: only fragment_points counts",
+        "belongs to; alone it is a segment the classifier calls guardrail, a false alarm or "
+        "not by a point or two. 0: only fragment_points counts",
     )
     ground_fragment_top_m: float = param(
         0.25,
