@@ -582,14 +582,13 @@ def _behind_front(
     side = np.where(np.bincount(segment, weights=lateral, minlength=n_seg) < 0, -1.0, 1.0)
     depth = lateral * side[segment]  # metres from the trajectory on the slice's side
     low, high = _lateral_bounds(segment, depth)
-    members = np.flatnonzero((high - low > params.gap_width_m)[segment])
-    if len(members) == 0:
+    wide = np.flatnonzero(high - low > params.gap_width_m)
+    if len(wide) == 0:
         return behind
-    s, d = segment[members], depth[members]
-    wide = np.unique(s)
-    _, _, _, cell, counts, owner = _bins_across(
+    _, _, members, cell, counts, owner = _bins_across(
         segment, depth, (low, high), wide, params.width_bin_m
     )
+    s, d = segment[members], depth[members]
     fullest = np.zeros(n_seg, np.int64)
     np.maximum.at(fullest, owner, counts)
     dense = counts > params.valley_share * fullest[owner]
