@@ -19,7 +19,8 @@ count of ``--labels``:
 
 After each batch it fine-tunes exactly as the app's "Train" and "Activate" do
 (:func:`~guardrail_core.review.training.train_from_run` in fast mode on the reviewed labels and
-the run's corrected labels elsewhere, then :func:`~guardrail_core.review.training.predict_run`
+the run's corrected labels elsewhere, but for those an operator contradicted on their component
+(``--keep-contradicted`` keeps them), then :func:`~guardrail_core.review.training.predict_run`
 and :func:`~guardrail_core.review.training.write_predictions`), and measures guardrail F (after
 label correction) on the rest of the street: every segment the oracle has not labelled yet,
 counted per segment (``guardrail_f1``) and per point (``guardrail_f1_points``: a segment weighs
@@ -91,6 +92,7 @@ def learning_curve(
     order: str,
     seed: int,
     reviewed_weight: float | None = None,
+    leave_out_contradicted: bool = True,
 ) -> dict:
     """Label, fine-tune and measure ``run_dir`` (modified in place) at each count of ``labels``."""
     rng = np.random.default_rng(seed)
@@ -122,6 +124,7 @@ def learning_curve(
                 point_labels,
                 params=ClassifierParams(mode="fast"),
                 reviewed_weight=reviewed_weight,
+                leave_out_contradicted=leave_out_contradicted,
             )
             write_predictions(run_dir, predict_run(run, trained.model), trained.model)
             run = load_run(run_dir)
@@ -154,6 +157,12 @@ def main() -> int:
         help="how many times an operator's label counts against the model's own in training "
         "(default: the app's, the reviewed segments together as much as the others)",
     )
+    parser.add_argument(
+        "--keep-contradicted",
+        action="store_true",
+        help="train on the model's labels an operator contradicted on their component too "
+        "(as before 2026-11-28; see contradicted_labels in guardrail_core/review/training.py)",
+    )
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     labels = sorted({int(x) for x in args.labels.split(",")})
@@ -176,7 +185,15 @@ def main() -> int:
             copy = Path(tmp) / f"run_{order}"
             shutil.copytree(run, copy)
             print(f"labelling in {order} order ...", file=sys.stderr, flush=True)
-            out[order] = learning_curve(copy, truth, labels, order, args.seed, args.reviewed_weight)
+            out[order] = learning_curve(
+                copy,
+                truth,
+                labels,
+                order,
+                args.seed,
+                args.reviewed_weight,
+                leave_out_contradicted=not args.keep_contradicted,
+            )
     if args.json:
         print(json.dumps(out, indent=1))
     else:

@@ -28,6 +28,7 @@ from guardrail_core.review.run_crops import read_crops
 from guardrail_core.review.training import (
     AGAINST_EFFECTIVE,
     AGAINST_OPERATOR,
+    contradicted_labels,
     effective_labels,
     predict_run,
     segment_labels,
@@ -71,8 +72,9 @@ def _flip_some(run: Run, k: int = 3) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _held_out_of(run: Run, point_labels: np.ndarray) -> np.ndarray:
-    """(S,) bool, the held-out split train_from_run (fast, default parameters) will draw."""
-    data = training_set_from_run(run, point_labels)
+    """(S,) bool, the held-out split train_from_run (fast, default parameters, every segment
+    trained on) will draw."""
+    data = training_set_from_run(run, point_labels, leave_out_contradicted=False)
     params = ClassifierParams(mode="fast")
     rng = np.random.default_rng(params.seed)
     return held_out_mask(data.labels, data.groups, params.held_out_fraction, rng)
@@ -145,8 +147,8 @@ def test_operator_labels_change_exactly_their_segments(run_path: Path) -> None:
 def test_training_set_from_run_fast_and_full(run_path: Path) -> None:
     run = load_run(run_path)
     labels, _ = _flip_some(run)
-    fast = training_set_from_run(run, labels, mode="fast")
-    full = training_set_from_run(run, labels, mode="full")
+    fast = training_set_from_run(run, labels, mode="fast", leave_out_contradicted=False)
+    full = training_set_from_run(run, labels, mode="full", leave_out_contradicted=False)
     ok = np.flatnonzero(run.segments["crop_status"] == CROP_OK)
     assert fast.crops is None and fast.embeddings is not None
     assert fast.embeddings.dtype == np.float32 and fast.embeddings.shape == (len(ok), EMBEDDING_DIM)
@@ -208,8 +210,14 @@ def test_train_from_run_compares_on_the_same_held_out_segments(run_path: Path) -
     run = load_run(run_path)
     labels, _ = _flip_some(run)
     reports: list[tuple[float, str]] = []
-    # Its speed (target <= 20 s) is measured by benchmarks/bench_app.py, not timed here.
-    trained = train_from_run(run, labels, progress_fn=lambda f, m: reports.append((f, m)))
+    # Its speed (target <= 20 s) is measured by benchmarks/bench_app.py, not timed here. Every
+    # segment trained on (test_contradicted_labels_are_left_out_of_training: the default).
+    trained = train_from_run(
+        run,
+        labels,
+        leave_out_contradicted=False,
+        progress_fn=lambda f, m: reports.append((f, m)),
+    )
     assert trained.seconds > 0
 
     new, current = trained.metrics_new, trained.metrics_current
@@ -258,7 +266,7 @@ def test_the_operators_labels_outweigh_the_models_own(
         return fit(*args, sample_weight=sample_weight, **kwargs)
 
     monkeypatch.setattr(training_module, "fit_segment_head", spy)
-    default = train_from_run(run, labels).model
+    default = train_from_run(run, labels, leave_out_contradicted=False).model
     expected = (len(run) - len(flipped)) / len(flipped)
     assert default.info["trained_on"]["reviewed_weight"] == pytest.approx(expected, abs=1e-3)
     final = weights[-1]  # the head refit on every segment
@@ -266,7 +274,7 @@ def test_the_operators_labels_outweigh_the_models_own(
     np.testing.assert_allclose(final[flipped], expected, rtol=1e-6)
     assert np.all(np.delete(final, flipped) == 1.0)
     weights.clear()
-    once = train_from_run(run, labels, reviewed_weight=1.0).model
+    once = train_from_run(run, labels, reviewed_weight=1.0, leave_out_contradicted=False).model
     assert once.info["trained_on"]["reviewed_weight"] == 1.0 and weights == [None, None]
     for bad in (0.5, float("inf"), True, "10"):
         with pytest.raises(InvalidOptionError, match="reviewed_weight"):
@@ -278,7 +286,7 @@ def test_train_from_run_compares_against_the_operators_labels(run_path: Path) ->
     labels, operator, held = _review_most(run)
     # The test run holds out one block of 20 segments, 16 of them reviewed here: fewer than the
     # default 20 (the fallback, test_train_from_run_compares_on_the_same_held_out_segments).
-    trained = train_from_run(run, labels, min_reviewed_held_out=10)
+    trained = train_from_run(run, labels, min_reviewed_held_out=10, leave_out_contradicted=False)
     new, current = trained.metrics_new, trained.metrics_current
     assert new is not None and current is not None
     assert np.array_equal(trained.held_out, held)
@@ -310,7 +318,9 @@ def test_train_from_run_falls_back_to_the_effective_labels(run_path: Path) -> No
     run = load_run(run_path)
     labels, operator, held = _review_most(run)
     n_reviewed = int((held & (operator >= 0)).sum())
-    trained = train_from_run(run, labels, min_reviewed_held_out=n_reviewed + 1)
+    trained = train_from_run(
+        run, labels, min_reviewed_held_out=n_reviewed + 1, leave_out_contradicted=False
+    )
     new, current = trained.metrics_new, trained.metrics_current
     assert new is not None and current is not None
     effective, _ = effective_labels(run, labels)
@@ -529,3 +539,62 @@ def test_write_predictions_replaces_the_runs_predictions(
     with pytest.raises(InvalidOptionError):
         write_predictions(run_copy, {**predicted, "label": predicted["label"][:-1]}, model)
     assert np.array_equal(load_run(run_copy).segments["label"], label)
+
+
+def test_contradicted_labels_on_a_hand_made_example() -> None:
+    #                     comp 7: G G G O | comp 3: G G O O | comp 9: G O (the run's labels)
+    component = np.array([7, 7, 7, 7, 3, 3, 3, 3, 9, 9])
+    model_label = np.array([1, 1, 1, 0, 1, 1, 0, 0, 1, 0], bool)
+    reviewed = np.array([1, 0, 0, 0, 1, 0, 0, 1, 0, 0], bool)
+    label = model_label.copy()
+    label[0] = False  # an operator says other where the model said guardrail
+    label[7] = True  # and guardrail where it said other; segment 4 confirmed as guardrail
+    out = contradicted_labels(component, label, reviewed)
+    # Comp 7: its guardrail-labelled slices, not its other one. Comp 3: the other-labelled
+    # slice 6; the guardrail slice 5 agrees with both operators' labels. Comp 9: no review.
+    assert out.tolist() == [0, 1, 1, 0, 0, 0, 1, 0, 0, 0]
+    # An operator's confirmation alone puts the model's other label on its component in doubt.
+    only_4 = np.zeros(10, bool)
+    only_4[4] = True
+    assert np.flatnonzero(contradicted_labels(component, model_label, only_4)).tolist() == [6, 7]
+    assert not contradicted_labels(component, label, np.zeros(10, bool)).any()
+    assert contradicted_labels(component[:0], label[:0], reviewed[:0]).shape == (0,)
+
+
+def test_contradicted_labels_are_left_out_of_training(run_path: Path) -> None:
+    run = load_run(run_path)
+    seg = run.segments
+    # The operator says other on one slice of the longest component the model called guardrail.
+    comps, counts = np.unique(seg["component"][seg["label"]], return_counts=True)
+    comp = comps[np.argmax(counts)]
+    members = np.flatnonzero((seg["component"] == comp) & seg["label"])
+    picked = members[len(members) // 2]
+    labels = _label_segments(run, np.array([picked]), LABEL_OTHER)
+    label, reviewed = effective_labels(run, labels)
+    left_out = contradicted_labels(seg["component"], label, reviewed)
+    assert np.flatnonzero(left_out).tolist() == np.setdiff1d(members, [picked]).tolist()
+    data = training_set_from_run(run, labels)
+    assert len(data.labels) == len(run) - len(members) + 1
+    assert data.sources[0]["left_out"] == len(members) - 1
+    assert np.array_equal(data.labels, label[~left_out])
+    kept = training_set_from_run(run, labels, leave_out_contradicted=False)
+    assert len(kept.labels) == len(run) and kept.sources[0]["left_out"] == 0
+
+    with_them = train_from_run(run, labels, leave_out_contradicted=False)
+    trained = train_from_run(run, labels)
+    info = trained.model.info["trained_on"]
+    assert info["labels"] == (
+        f"operator labels (1 segments) + corrected labels ({len(members) - 1} contradicted "
+        "by an operator on their component left out)"
+    )
+    assert not trained.held_out[left_out].any()
+    # The new model follows the operator on the rest of the component only when the model's
+    # own labels there do not outvote the one label (57 siblings: 56 and 0 on the test run).
+    siblings = np.setdiff1d(members, [picked])
+    follows = {
+        name: int((~predict_run(run, t.model)["raw_label"][siblings]).sum())
+        for name, t in (("with", with_them), ("without", trained))
+    }
+    assert len(siblings) >= 20
+    assert follows["without"] >= 0.9 * len(siblings)
+    assert follows["with"] <= 0.1 * len(siblings)

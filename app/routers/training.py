@@ -29,7 +29,9 @@ def post_train(session: Session, jobs: Jobs, body: TrainBody | None = None) -> d
     """Start fine-tuning a model from the label store; poll ``/api/jobs/{job}``.
 
     Segments an operator labelled take the operator's label; with ``include_unreviewed`` the
-    others take the run's corrected label.
+    others take the run's corrected label, but for those labelled otherwise than an operator
+    labelled a segment of their component, which are left out
+    (:func:`guardrail_core.review.training.contradicted_labels`).
     """
     body = body or TrainBody()
     work = review_jobs.fine_tune(
