@@ -74,6 +74,112 @@ def test_a_segment_the_classifier_is_sure_of_is_not_filled() -> None:
         correct_labels(labels, segments, probability=probability[:5])
 
 
+#: A wire row of a mesh fence 4.4 m off: a thin horizontal piece, as a pipe rail is.
+WIRE = (4.40, 4.42, 0.60, 0.62)
+NAN = np.nan
+
+
+def test_a_short_component_whose_crops_say_other_is_other() -> None:
+    """Four slices of a wire row the head called guardrail by its shape; the crops of three of
+    them say other."""
+    labels = np.ones(4, bool)
+    segments = extents(*run(range(4), WIRE))
+    crops = np.array([0.02, NAN, 0.2, 0.1])
+    assert not correct_labels(labels, segments, crop_probability=crops).any()
+    # Three of four crops saying other are enough if crop_veto_share asks for 0.75 (not by
+    # default: one crop saying guardrail saves a component), and one crop is if one is all the
+    # rule asks for.
+    three = [0.02, 0.9, 0.2, 0.1]
+    assert correct_labels(labels, segments, crop_probability=three).all()
+    most = CorrectionParams(crop_veto_share=0.75)
+    assert not correct_labels(labels, segments, most, crop_probability=three).any()
+    one = CorrectionParams(crop_veto_min_crops=1)
+    assert not correct_labels(labels, segments, one, crop_probability=[0.02, NAN, NAN, NAN]).any()
+    # No crops, one crop, two of four saying guardrail, the rule off, a shorter limit: kept.
+    kept = {
+        "no crops": ([NAN] * 4, CorrectionParams()),
+        "one crop": ([0.02, NAN, NAN, NAN], CorrectionParams()),
+        "two of four": ([0.02, 0.9, 0.2, 0.7], most),
+        "off": (crops, CorrectionParams(crop_veto_max_slices=0)),
+        "longer than the limit": (crops, CorrectionParams(crop_veto_max_slices=3)),
+    }
+    for name, (crop_probability, params) in kept.items():
+        corrected = correct_labels(labels, segments, params, crop_probability=crop_probability)
+        assert corrected.all(), name
+    assert correct_labels(labels, segments).all()  # no crop probabilities given: no veto
+    with pytest.raises(GuardrailError, match="crop probabilities of shape"):
+        correct_labels(labels, segments, crop_probability=crops[:2])
+
+
+def test_a_component_longer_than_the_limit_keeps_the_label_of_its_shape() -> None:
+    """A rail whose crops all say other (a design the CNN never saw): over 20 slices its shape
+    decides, up to 20 its crops."""
+    crops = np.full(21, 0.1)
+    assert correct_labels(np.ones(21, bool), extents(*run(range(21))), crop_probability=crops).all()
+    twenty = extents(*run(range(20)))
+    assert not correct_labels(np.ones(20, bool), twenty, crop_probability=crops[:20]).any()
+
+
+def test_the_crops_of_one_component_do_not_overrule_another() -> None:
+    """A rail (component 0, 10 slices, its crops not sure but guardrail) and a bracket's piece inside its
+    cross-section (component 1, slices 3-5, its crops saying other). The piece is other, its
+    middle slice not filled though it lies inside the rail's run; the rail keeps its label."""
+    bracket = (2.02, 2.08, 0.5, 0.6)
+    segments = extents(*run(range(10)), *run(range(3, 6), bracket), component=[0] * 10 + [1] * 3)
+    labels = np.ones(13, bool)
+    labels[11] = False
+    crops = np.r_[np.full(10, 0.6), 0.1, 0.2, 0.05]
+    assert correct_labels(labels, segments).all()  # without crops: the piece's hole is filled
+    corrected = correct_labels(labels, segments, crop_probability=crops)
+    np.testing.assert_array_equal(corrected, np.r_[np.ones(10, bool), False, False, False])
+
+
+@pytest.mark.parametrize("seed", [70, 71])
+def test_crops_beyond_the_reach_do_not_change_a_corrected_label(seed: int) -> None:
+    """Components spanning up to 7, 20 (crop_veto_max_slices) and 21 slices, raw labels and
+    crop probabilities drawn again beyond the reach: what lets a processing tile ask the CNN
+    only near the slices it owns."""
+    params = CorrectionParams()
+    reach = correction_reach_slices(params)
+    rng = np.random.default_rng(seed)
+    n = 900
+    slices = rng.integers(0, 140, n)
+    kind = rng.integers(0, 3, n)
+    offset = rng.integers(0, 30, 3)  # components do not all start at slice 0
+    component = kind * 1000 + (slices + offset[kind]) // np.array([7, 20, 21])[kind]
+    lateral = rng.choice([1.7, 2.0, 2.05, 2.4], n) + rng.uniform(0.0, 0.05, n)
+    height = rng.choice([0.0, 0.3, 0.6], n) + rng.uniform(0.0, 0.1, n)
+    ext = SegmentExtents(
+        slices,
+        np.column_stack([lateral, lateral + rng.uniform(0.05, 0.2, n)]),
+        np.column_stack([height, height + rng.uniform(0.1, 0.7, n)]),
+        component,
+        rng.integers(1, 20, n),
+    )
+
+    def draw(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Labels and crops of ``rows``: the crops of half the components, drawn anew each
+        time, all say other."""
+        m = len(rows)
+        other = rng.random(int(component.max()) + 1) < 0.5
+        crops = np.where(other[component[rows]], 0.49, 1.0) * rng.random(m)
+        return rng.random(m) < 0.7, np.where(rng.random(m) < 0.3, NAN, crops)
+
+    core = (slices >= 60) & (slices < 80)
+    near = (slices >= 60 - reach) & (slices < 80 + reach)
+    vetoed = 0
+    for _ in range(20):
+        labels, crops = draw(np.arange(n))
+        corrected = correct_labels(labels, ext, params, crop_probability=crops)
+        beyond_labels, beyond_crops = draw(np.flatnonzero(~near))
+        labels[~near], crops[~near] = beyond_labels, beyond_crops
+        np.testing.assert_array_equal(
+            correct_labels(labels, ext, params, crop_probability=crops)[core], corrected[core]
+        )
+        vetoed += int((corrected != correct_labels(labels, ext, params))[core].sum())
+    assert vetoed > 20  # the fixture exercises the veto
+
+
 #: A hedge 0.3 m behind BEAM, as tall as a person.
 HEDGE = (2.4, 2.9, 0.0, 1.6)
 

@@ -449,11 +449,14 @@ def test_predict_run_with_the_runs_model_reproduces_the_run(
 def test_predict_run_keeps_the_correction_rules_of_a_run_from_before_them(
     run_copy: Path, model_path: Path
 ) -> None:
-    """A run whose run.json predates the fill floor and the rule of what stands behind a rail
-    is re-predicted without them (filling by position alone, keeping what stands behind)."""
+    """A run whose run.json predates the fill floor, the rule of what stands behind a rail and
+    the crop veto is re-predicted without them (filling by position alone, keeping what stands
+    behind and short components whatever their crops say)."""
     info_path = run_copy / "run.json"
     info = json.loads(info_path.read_text())
     for name in ("fill_min_probability", "behind_gap_m", "behind_max_m", "behind_wide_m"):
+        info["params"]["correction"].pop(name)
+    for name in ("crop_veto_max_slices", "crop_veto_min_crops", "crop_veto_share"):
         info["params"]["correction"].pop(name)
     info_path.write_text(json.dumps(info))
     run = load_run(run_copy)
@@ -462,7 +465,9 @@ def test_predict_run_keeps_the_correction_rules_of_a_run_from_before_them(
     extents = SegmentExtents(
         seg["slice_index"], seg["lateral"], seg["height"], seg["component"], seg["n_points"]
     )
-    old = CorrectionParams(fill_min_probability=0.0, behind_gap_m=float("inf"))
+    old = CorrectionParams(
+        fill_min_probability=0.0, behind_gap_m=float("inf"), crop_veto_max_slices=0
+    )
     expected = correct_labels(predicted["raw_label"], extents, old, predicted["probability"])
     np.testing.assert_array_equal(predicted["label"], expected)
 
@@ -479,6 +484,21 @@ def test_a_run_from_before_the_rule_for_wide_segments_keeps_them(run_copy: Path)
     info_path.write_text(json.dumps(info))
     params = _run_correction(load_run(run_copy))
     assert params == CorrectionParams(behind_wide_m=float("inf"))
+
+
+def test_a_run_from_before_the_crop_veto_keeps_short_components_whatever_their_crops(
+    run_copy: Path,
+) -> None:
+    """A run whose correction parameters predate the crop veto is re-predicted without it."""
+    from guardrail_core.review.training import _run_correction
+
+    assert _run_correction(load_run(run_copy)) == CorrectionParams()
+    info_path = run_copy / "run.json"
+    info = json.loads(info_path.read_text())
+    for name in ("crop_veto_max_slices", "crop_veto_min_crops", "crop_veto_share"):
+        info["params"]["correction"].pop(name)
+    info_path.write_text(json.dumps(info))
+    assert _run_correction(load_run(run_copy)) == CorrectionParams(crop_veto_max_slices=0)
 
 
 def test_write_predictions_replaces_the_runs_predictions(

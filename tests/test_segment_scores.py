@@ -12,7 +12,11 @@ import pytest
 from guardrail_core.extract.backbone import embed_crops
 from guardrail_core.extract.crops import CROP_OK
 from guardrail_core.extract.model_folder import DEFAULT_MODEL_DIR, load_model
-from guardrail_core.extract.segment_scores import ClassifyParams, score_segments
+from guardrail_core.extract.segment_scores import (
+    ClassifyParams,
+    score_segments,
+    weighed_crop_probability,
+)
 from guardrail_core.formats.run_folder import load_run
 from guardrail_core.review.run_crops import complete_embeddings, read_crops
 from guardrail_core.review.training import predict_run
@@ -44,6 +48,14 @@ def test_shape_first_gives_the_labels_of_asking_every_crop(run_path: Path) -> No
     assert 10 <= first.asked.sum() < 0.8 * has_crop.sum()
     assert not first.asked[~has_crop].any()
     np.testing.assert_array_equal(first.raw_label, every.raw_label)
+    # The crop veto of label correction counts the crops the head weighed: the same either way.
+    clip = ClassifyParams().crop_probability_clip
+    weighed = [
+        weighed_crop_probability(model, features, scores.crop_probability, clip)
+        for scores in (every, first)
+    ]
+    np.testing.assert_allclose(weighed[0], weighed[1], atol=1e-6)
+    assert np.isfinite(weighed[0]).sum() == first.asked.sum()
     asked = first.asked
     # (batches of other crops: the runtime may sum in another order)
     np.testing.assert_allclose(

@@ -8,7 +8,9 @@ beside and above the road touch.
 Beyond the paper: a guardrail segment that stands behind a run of guardrail of another object, in
 the same slice and on the same side of the path, becomes other. A hedge, a fence or a bicycle
 rack just behind a rail is cut into slices like the rail, and its crop shows the rail in front of
-it; the paper's streets had nothing behind their rails.
+it; the paper's streets had nothing behind their rails. And a short wireframe component whose
+crops say other is other, whatever its shape: a far mesh fence's wire rows come apart into short
+pieces that look like a pipe rail, and the crops of them show the mesh.
 """
 
 from __future__ import annotations
@@ -141,6 +143,37 @@ class CorrectionParams(StageParams):
         "than the rest is not something the rest stands behind",
     )
 
+    crop_veto_max_slices: int = param(
+        20,
+        ge=0,
+        le=1000,
+        doc="every segment of a wireframe component spanning at most this many slices (10 m in "
+        "0.5 m slices) whose crops say other (crop_veto_min_crops of them at least, "
+        "crop_veto_share of them under 0.5: all by default) is other, whatever the segment "
+        "head made of its shape: a short piece says little by its shape, and the top pipe and "
+        "wire rows of a mesh fence 4-8 m off come apart into pieces of a few slices that the "
+        "head takes for a pipe rail. Only crops the head weighed count (those whose segment's "
+        "shape left the label open). At most the tile margin in slices (20 with the default "
+        "10 m), so that a tile sees such a component whole; 0 turns the rule off",
+    )
+    crop_veto_min_crops: int = param(
+        2,
+        ge=1,
+        le=1000,
+        doc="a short component's crops overrule its shape only if it has at least this many: one "
+        "crop of a far slice of 30-40 px is too often wrong",
+    )
+    crop_veto_share: float = param(
+        1.0,
+        gt=0,
+        le=1,
+        doc="share of a short component's crops that must say other (P(guardrail) under 0.5) "
+        "for them to overrule its shape: every one of them by default, since a component can "
+        "hold a rail and the hedge pressed against it, and the rail's crops are of a design "
+        "the CNN may not know (0.75 cost a street of a design its model never saw 17 "
+        "guardrail segments of such rails)",
+    )
+
     def check_relations(self) -> None:
         if np.isfinite(self.behind_gap_m) and self.behind_gap_m >= self.behind_max_m:
             self.fail(
@@ -180,9 +213,17 @@ def correction_reach_slices(params: CorrectionParams = CorrectionParams()) -> in
     away; whether a run spans ``m`` slices is settled within ``m`` slices (a run that leaves them
     already spans more); the two-slice fill looks a further run test and two slices beyond; the
     isolation test of the filled labels ``m`` more; whether a run in front spans ``f`` slices
-    ``f`` more; the second isolation test ``m`` more: ``3 m + f + 3`` in all.
+    ``f`` more; the second isolation test ``m`` more: ``3 m + f + 3`` in all. The crop veto
+    (:func:`_crops_say_other`) makes a raw label depend on the crops of its component within
+    ``crop_veto_max_slices`` slices (whether the component spans more is settled that far):
+    that many more.
     """
-    return 3 * params.min_run_slices + params.behind_front_min_slices + 3
+    return (
+        3 * params.min_run_slices
+        + params.behind_front_min_slices
+        + 3
+        + (params.crop_veto_max_slices)
+    )
 
 
 def neighbour_pairs(
@@ -352,11 +393,39 @@ def _behind_a_run(
     return out
 
 
+def _crops_say_other(
+    extents: SegmentExtents, crop_probability: np.ndarray, params: CorrectionParams
+) -> np.ndarray:
+    """(S,) bool: segments of a wireframe component spanning at most ``crop_veto_max_slices``
+    slices of which at least ``crop_veto_min_crops`` have a crop probability (finite) and at
+    least ``crop_veto_share`` of those are under 0.5."""
+    n = len(crop_probability)
+    if params.crop_veto_max_slices == 0 or n == 0:
+        return np.zeros(n, bool)
+    _, component = np.unique(np.asarray(extents.component), return_inverse=True)
+    slice_index = np.asarray(extents.slice_index, np.int64)
+    k = int(component.max()) + 1
+    first = np.full(k, np.iinfo(np.int64).max)
+    last = np.full(k, np.iinfo(np.int64).min)
+    np.minimum.at(first, component, slice_index)
+    np.maximum.at(last, component, slice_index)
+    has_crop = np.isfinite(crop_probability)
+    crops = np.bincount(component, weights=has_crop, minlength=k)
+    other = np.bincount(component, weights=has_crop & (crop_probability < 0.5), minlength=k)
+    say_other = (
+        (last - first + 1 <= params.crop_veto_max_slices)
+        & (crops >= params.crop_veto_min_crops)
+        & (other >= params.crop_veto_share * crops)
+    )
+    return say_other[component]
+
+
 def correct_labels(
     labels: np.ndarray,
     extents: SegmentExtents,
     params: CorrectionParams = CorrectionParams(),
     probability: np.ndarray | None = None,
+    crop_probability: np.ndarray | None = None,
 ) -> np.ndarray:
     """Correct raw segment labels by their neighbours.
 
@@ -368,6 +437,11 @@ def correct_labels(
     probability : (S,) float, the classifier's P(guardrail) of each segment (NaN: no answer), or
         None (none known: every other segment may be filled); segments under
         ``params.fill_min_probability`` are not filled
+    crop_probability : (S,) float, the crop classifier's P(guardrail) of each crop the segment
+        head weighed (NaN: none, or the shape decided alone;
+        :func:`~guardrail_core.extract.segment_scores.weighed_crop_probability`), or None (the
+        crop veto is not applied): every segment of a short component whose crops say other
+        becomes other and is not filled (``crop_veto_max_slices``)
 
     Returns
     -------
@@ -389,15 +463,23 @@ def correct_labels(
     ):
         if len(array) != n:
             raise InvalidOptionError(f"correct_labels: {n} labels but {len(array)} rows of {name}")
-    if probability is not None and np.shape(probability) != (n,):
-        raise InvalidOptionError(
-            f"correct_labels: {n} labels but probabilities of shape {np.shape(probability)}"
-        )
+    for name, values in (("probabilities", probability), ("crop probabilities", crop_probability)):
+        if values is not None and np.shape(values) != (n,):
+            raise InvalidOptionError(
+                f"correct_labels: {n} labels but {name} of shape {np.shape(values)}"
+            )
     if n == 0:
         return labels
     fillable = np.ones(n, bool)
     if probability is not None:
         fillable = ~(np.asarray(probability, np.float64) < params.fill_min_probability)  # NaN: yes
+
+    # Beyond the paper: a short component whose crops say other is other, however its shape
+    # looks; nothing of it is filled either.
+    if crop_probability is not None:
+        say_other = _crops_say_other(extents, np.asarray(crop_probability, np.float64), params)
+        labels &= ~say_other
+        fillable &= ~say_other
     slice_index = np.asarray(extents.slice_index, np.int64)
     pairs = neighbour_pairs(extents, params)
 

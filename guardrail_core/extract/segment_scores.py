@@ -132,6 +132,24 @@ def crops_to_ask(
     return asked
 
 
+def weighed_crop_probability(
+    model: GuardrailClassifier,
+    features: np.ndarray,
+    crop_probability: np.ndarray,
+    crop_clip: float = TRAINING_CLIP,
+) -> np.ndarray:
+    """(S,) float64: the crops' P(guardrail) where the segment head weighed them, NaN where the
+    shape decided alone (:meth:`GuardrailClassifier.shape_decides`) or there is none.
+
+    What label correction's crop veto counts
+    (:attr:`~guardrail_core.extract.correct.CorrectionParams.crop_veto_max_slices`): the same
+    crops whether the CNN was asked for every crop or only those (``shape_first``), so the
+    labels are the same either way.
+    """
+    decided = model.shape_decides(features, crop_clip)
+    return np.where(decided, np.nan, np.asarray(crop_probability, np.float64))
+
+
 def fuse_scores(
     model: GuardrailClassifier,
     features: np.ndarray,

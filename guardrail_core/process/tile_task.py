@@ -34,7 +34,7 @@ from guardrail_core.errors import GuardrailError
 from guardrail_core.extract.classify import GuardrailClassifier
 from guardrail_core.extract.correct import correct_labels, correction_reach_slices
 from guardrail_core.extract.pipeline import ExtractionParams, extract, segment_crops
-from guardrail_core.extract.segment_scores import score_segments
+from guardrail_core.extract.segment_scores import score_segments, weighed_crop_probability
 from guardrail_core.formats.drive import Drive, DriveSource, open_drive
 from guardrail_core.formats.run_folder import (
     CROP_OK,
@@ -239,7 +239,10 @@ def process_window(
         )
         embeddings = scores.embeddings
     with timer.stage("correction", points=len(segments)):
-        label = correct_labels(raw_label, result.extents(), params.correction, probability)
+        weighed = weighed_crop_probability(
+            model, result.features, crop_probability, params.classify.crop_probability_clip
+        )
+        label = correct_labels(raw_label, result.extents(), params.correction, probability, weighed)
 
     with timer.stage("write", points=len(segments)):
         # A segment belongs to the tile that owns its slice (tile edges are slice edges).

@@ -41,7 +41,12 @@ from guardrail_core.extract.classify import (
 from guardrail_core.extract.correct import CorrectionParams, SegmentExtents, correct_labels
 from guardrail_core.extract.crops import CROP_OK
 from guardrail_core.extract.segment_head import SegmentHeadParams
-from guardrail_core.extract.segment_scores import ClassifyParams, crops_to_ask, fuse_scores
+from guardrail_core.extract.segment_scores import (
+    ClassifyParams,
+    crops_to_ask,
+    fuse_scores,
+    weighed_crop_probability,
+)
 from guardrail_core.extract.training import HOLD_OUT_BLOCK_SLICES, TrainingSet, train_on_set
 from guardrail_core.formats.run_folder import SEGMENT_FIELDS, Run, load_run, replace_run_tables
 from guardrail_core.formats.run_info import ModelRef, Predicted
@@ -533,7 +538,10 @@ def predict_run(
         segments["component"],
         segments["n_points"],
     )
-    label = correct_labels(raw_label, extents, correction, probability)
+    weighed = weighed_crop_probability(
+        model, segments["features"], crop_probability, classify.crop_probability_clip
+    )
+    label = correct_labels(raw_label, extents, correction, probability, weighed)
     out = {
         "crop_probability": crop_probability,
         "probability": probability,
@@ -690,12 +698,14 @@ def _run_classify(run: Run) -> ClassifyParams:
 
 def _run_correction(run: Run) -> CorrectionParams:
     """The run's own correction rules; a run from before the fill floor filled by position
-    alone, one from before the rule of what stands behind a rail kept it, and one from before
-    wide segments touching a rail's back kept them."""
+    alone, one from before the rule of what stands behind a rail kept it, one from before
+    wide segments touching a rail's back kept them, and one from before the crop veto kept
+    short components whatever their crops said."""
     before = {
         "fill_min_probability": 0.0,
         "behind_gap_m": float("inf"),
         "behind_wide_m": float("inf"),
+        "crop_veto_max_slices": 0,
     }
     stored = {**before, **(run.info.params.get("correction") or {})}
     known = CorrectionParams.__dataclass_fields__
