@@ -218,6 +218,48 @@ def test_an_arch_king_post_is_found_from_few_units(seed):
     assert abs(king.radius - 0.012) < 0.004
 
 
+@pytest.mark.parametrize("seed", [1, 2, 4, 5])
+def test_a_king_post_under_a_rail_whose_points_miss_its_side_is_found(seed, monkeypatch):
+    """A sparse king post (45 points, as from a few units of a far run; the outer arch's 700)
+    is found in the histogram of the points off the straight pipes, where pipes run across both
+    its ends. The top rail's points come in clumps along x (scan lines); where none falls on one
+    side of the post within the few centimetres the point count looks at, the top rail, found
+    as a straight pipe before, still runs across the post's top."""
+    import importlib
+
+    short_verticals = importlib.import_module("guardrail_core.reconstruct.pipes.short_verticals")
+    rng = np.random.default_rng(seed)
+    post = _pipe_points(rng, [1.0, 0.75], [1.0, 0.9], 0.012, 45)
+    top = _pipe_points(rng, [0, 0.9], [LENGTH, 0.9], 0.0243, 1600)
+    top = top[(top[:, 0] < 1.025) | (top[:, 0] > 1.06)]  # no clump right of the post
+    pts = np.vstack(
+        [
+            top,
+            _pipe_points(rng, [0, 0.2], [LENGTH, 0.2], 0.0243, 1600),
+            _arch(rng, [1.0, 0.2], 0.55, 0.014, 700),
+            _arch(rng, [1.0, 0.2], 0.35, 0.012, 400),
+            post,
+            _pole_points(rng, 0.0),
+            _pole_points(rng, LENGTH),
+        ]
+    )
+    rec = reconstruct_pipes(pts, LENGTH, POLE_R)
+    assert [q.kind for q in rec.pipes] == [
+        "horizontal",
+        "horizontal",
+        "vertical",
+        "curved",
+        "curved",
+    ]
+    [king] = [q for q in rec.pipes if q.kind == "vertical"]
+    assert abs(king.axis[0, 0] - 1.0) < 0.005
+    assert np.abs(np.sort(king.axis[:, 1]) - [0.75, 0.9]).max() < 0.03
+    # Counting the rail's points alone misses it.
+    monkeypatch.setattr(short_verticals, "_line_across", lambda *args: False)
+    alone = reconstruct_pipes(pts, LENGTH, POLE_R)
+    assert [q.kind for q in alone.pipes].count("vertical") == 0
+
+
 def test_no_points_gives_a_note_not_a_crash():
     rec = reconstruct_pipes(np.zeros((0, 3)), LENGTH, POLE_R)
     assert rec.pipes == () and rec.notes

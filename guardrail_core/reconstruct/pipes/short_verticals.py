@@ -1,7 +1,9 @@
 """Short vertical pipes between two pipes that run across them (an arch's king post, §4.3).
 
 In the x histogram of all points a 0.15 m vertical barely rises above the rails; once the
-straight pipes' points are out, it stands out in the histogram of the rest.
+straight pipes' points are out, it stands out in the histogram of the rest. It is one where
+pipes run across both its ends: points on either side (:func:`crossed`), or a straight pipe
+found before it.
 """
 
 from __future__ import annotations
@@ -82,7 +84,8 @@ def short_verticals(
             continue
         y0, y1, radius, drift = found
         if drift > p.short_drift_m or not all(
-            crossed(pts, centre, end, radius, p) for end in (y0, y1)
+            crossed(pts, centre, end, radius, p) or _line_across(lines, centre, end, p)
+            for end in (y0, y1)
         ):
             continue
         band = (np.abs(x - centre) <= half) & (y >= y0) & (y <= y1) & ~taken
@@ -91,3 +94,20 @@ def short_verticals(
         skels.append(Skeleton(xy=xy, kind="vertical", idx=off[band]))
     mask[np.flatnonzero(keep)[taken]] = True
     return skels, mask
+
+
+def _line_across(lines: list[Skeleton], x: float, y: float, p: PipeParams) -> bool:
+    """Whether a straight pipe of ``lines`` runs across the end (x, y) of a short vertical
+    (metres): it spans x (and ``short_window_m`` either side) and its axis passes within
+    ``slice_interval_m`` plus its band's half-width ``line_band_m`` of y there. The points of
+    a rail across a king post's top come in clumps along x (the scan lines), and a clump may
+    miss the few centimetres beside the post that :func:`crossed` counts on."""
+    for line in lines:
+        (x0, y0), (x1, y1) = line.xy[0], line.xy[-1]
+        lo, hi = min(x0, x1), max(x0, x1)
+        if hi - lo <= 0 or not lo + p.short_window_m <= x <= hi - p.short_window_m:
+            continue
+        y_at = y0 + (y1 - y0) * (x - x0) / (x1 - x0)
+        if abs(y_at - y) <= p.slice_interval_m + p.line_band_m:
+            return True
+    return False
