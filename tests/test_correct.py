@@ -121,9 +121,10 @@ def test_a_component_longer_than_the_limit_keeps_the_label_of_its_shape() -> Non
 
 
 def test_the_crops_of_one_component_do_not_overrule_another() -> None:
-    """A rail (component 0, 10 slices, its crops not sure but guardrail) and a bracket's piece inside its
-    cross-section (component 1, slices 3-5, its crops saying other). The piece is other, its
-    middle slice not filled though it lies inside the rail's run; the rail keeps its label."""
+    """A rail (component 0, 10 slices, its crops not sure but guardrail) and a bracket's piece
+    inside its cross-section (component 1, slices 3-5, its crops saying other). The piece is
+    other, its middle slice not filled though it lies inside the rail's run; the rail keeps its
+    label."""
     bracket = (2.02, 2.08, 0.5, 0.6)
     segments = extents(*run(range(10)), *run(range(3, 6), bracket), component=[0] * 10 + [1] * 3)
     labels = np.ones(13, bool)

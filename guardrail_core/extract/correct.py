@@ -218,12 +218,8 @@ def correction_reach_slices(params: CorrectionParams = CorrectionParams()) -> in
     ``crop_veto_max_slices`` slices (whether the component spans more is settled that far):
     that many more.
     """
-    return (
-        3 * params.min_run_slices
-        + params.behind_front_min_slices
-        + 3
-        + (params.crop_veto_max_slices)
-    )
+    rules = 3 * params.min_run_slices + params.behind_front_min_slices + 3
+    return rules + params.crop_veto_max_slices
 
 
 def neighbour_pairs(
