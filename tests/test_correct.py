@@ -74,6 +74,23 @@ def test_a_segment_the_classifier_is_sure_of_is_not_filled() -> None:
         correct_labels(labels, segments, probability=probability[:5])
 
 
+def rail_band(
+    rng: np.random.Generator, slices: np.ndarray, component: np.ndarray
+) -> SegmentExtents:
+    """Random segments of rails, posts, curbs and hedges in a narrow band beside the road, in
+    ``slices`` (S,) and of ``component`` (S,): most segments touch, runs are long."""
+    n = len(slices)
+    lateral = rng.choice([1.7, 2.0, 2.05, 2.4], n) + rng.uniform(0.0, 0.05, n)
+    height = rng.choice([0.0, 0.3, 0.6], n) + rng.uniform(0.0, 0.1, n)
+    return SegmentExtents(
+        slices,
+        np.column_stack([lateral, lateral + rng.uniform(0.05, 0.2, n)]),
+        np.column_stack([height, height + rng.uniform(0.1, 0.7, n)]),
+        np.asarray(component, np.int64),
+        rng.integers(1, 20, n),
+    )
+
+
 #: A wire row of a mesh fence 4.4 m off: a thin horizontal piece, as a pipe rail is.
 WIRE = (4.40, 4.42, 0.60, 0.62)
 NAN = np.nan
@@ -148,15 +165,7 @@ def test_crops_beyond_the_reach_do_not_change_a_corrected_label(seed: int) -> No
     kind = rng.integers(0, 3, n)
     offset = rng.integers(0, 30, 3)  # components do not all start at slice 0
     component = kind * 1000 + (slices + offset[kind]) // np.array([7, 20, 21])[kind]
-    lateral = rng.choice([1.7, 2.0, 2.05, 2.4], n) + rng.uniform(0.0, 0.05, n)
-    height = rng.choice([0.0, 0.3, 0.6], n) + rng.uniform(0.0, 0.1, n)
-    ext = SegmentExtents(
-        slices,
-        np.column_stack([lateral, lateral + rng.uniform(0.05, 0.2, n)]),
-        np.column_stack([height, height + rng.uniform(0.1, 0.7, n)]),
-        component,
-        rng.integers(1, 20, n),
-    )
+    ext = rail_band(rng, slices, component)
 
     def draw(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Labels and crops of ``rows``: the crops of half the components, drawn anew each
@@ -632,16 +641,7 @@ def test_raw_labels_beyond_the_reach_do_not_change_a_corrected_label(
     rng = np.random.default_rng(60 + min_run_slices + 10 * max_hole_slices)
     n = 700
     slices = rng.integers(0, 100, n)
-    # Rails, posts, curbs and hedges in a narrow band: most segments touch, runs are long.
-    lateral = rng.choice([1.7, 2.0, 2.05, 2.4], n) + rng.uniform(0.0, 0.05, n)
-    height = rng.choice([0.0, 0.3, 0.6], n) + rng.uniform(0.0, 0.1, n)
-    ext = SegmentExtents(
-        slices,
-        np.column_stack([lateral, lateral + rng.uniform(0.05, 0.2, n)]),
-        np.column_stack([height, height + rng.uniform(0.1, 0.7, n)]),
-        rng.integers(0, 3, n),  # rails, posts and what stands behind them
-        rng.integers(1, 20, n),
-    )
+    ext = rail_band(rng, slices, rng.integers(0, 3, n))  # rails, posts, what stands behind
     core = (slices >= 40) & (slices < 60)
     near = (slices >= 40 - reach) & (slices < 60 + reach)
     corrections = behind = 0

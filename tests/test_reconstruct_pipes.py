@@ -190,6 +190,22 @@ def test_an_arch_foot_does_not_take_over_its_rail(seed):
         assert np.abs(np.sort(feet) - [1.0 - radius, 1.0 + radius]).max() < 0.12
 
 
+def _arch_design(rng, top, post, arch_points):
+    """(N, 3) points of the design pipe_arch from the top rail's and the king post's points,
+    the bottom rail's, the two arches' (``arch_points``: outer, inner) and the poles'."""
+    return np.vstack(
+        [
+            top,
+            _pipe_points(rng, [0, 0.2], [LENGTH, 0.2], 0.0243, 1600),
+            _arch(rng, [1.0, 0.2], 0.55, 0.014, arch_points[0]),
+            _arch(rng, [1.0, 0.2], 0.35, 0.012, arch_points[1]),
+            post,
+            _pole_points(rng, 0.0),
+            _pole_points(rng, LENGTH),
+        ]
+    )
+
+
 @pytest.mark.parametrize("seed", range(6))
 def test_an_arch_king_post_is_found_from_few_units(seed):
     # The design pipe_arch from 8 superimposed units: a 0.15 m king post between the outer
@@ -198,17 +214,8 @@ def test_an_arch_king_post_is_found_from_few_units(seed):
     rng = np.random.default_rng(seed)
     post = _pipe_points(rng, [1.0, 0.75], [1.0, 0.9], 0.012, 64)
     post[:, 0] += np.repeat(rng.uniform(-0.005, 0.005, 8), 8)
-    pts = np.vstack(
-        [
-            _pipe_points(rng, [0, 0.9], [LENGTH, 0.9], 0.0243, 1600),
-            _pipe_points(rng, [0, 0.2], [LENGTH, 0.2], 0.0243, 1600),
-            _arch(rng, [1.0, 0.2], 0.55, 0.014, 1000),
-            _arch(rng, [1.0, 0.2], 0.35, 0.012, 700),
-            post,
-            _pole_points(rng, 0.0),
-            _pole_points(rng, LENGTH),
-        ]
-    )
+    top = _pipe_points(rng, [0, 0.9], [LENGTH, 0.9], 0.0243, 1600)
+    pts = _arch_design(rng, top, post, (1000, 700))
     rec = reconstruct_pipes(pts, LENGTH, POLE_R)
     kinds = [p.kind for p in rec.pipes]
     assert kinds == ["horizontal", "horizontal", "vertical", "curved", "curved"]
@@ -232,17 +239,7 @@ def test_a_king_post_under_a_rail_whose_points_miss_its_side_is_found(seed, monk
     post = _pipe_points(rng, [1.0, 0.75], [1.0, 0.9], 0.012, 45)
     top = _pipe_points(rng, [0, 0.9], [LENGTH, 0.9], 0.0243, 1600)
     top = top[(top[:, 0] < 1.025) | (top[:, 0] > 1.06)]  # no clump right of the post
-    pts = np.vstack(
-        [
-            top,
-            _pipe_points(rng, [0, 0.2], [LENGTH, 0.2], 0.0243, 1600),
-            _arch(rng, [1.0, 0.2], 0.55, 0.014, 700),
-            _arch(rng, [1.0, 0.2], 0.35, 0.012, 400),
-            post,
-            _pole_points(rng, 0.0),
-            _pole_points(rng, LENGTH),
-        ]
-    )
+    pts = _arch_design(rng, top, post, (700, 400))
     rec = reconstruct_pipes(pts, LENGTH, POLE_R)
     assert [q.kind for q in rec.pipes] == [
         "horizontal",
