@@ -219,12 +219,13 @@ def test_what_stands_behind_a_rail_becomes_other() -> None:
 
 def test_a_hedge_touching_the_back_of_a_rail_becomes_other() -> None:
     """A hedge cut from the back of a rail (``SegmentParams.front_layer_m``): no gap between
-    them, but it spans 0.4 m or more across (``behind_wide_m``); a narrow thing touching the
-    rail's back, or the rule for wide things off, keeps it."""
-    touching = (2.1, 2.8, 0.1, 1.3)
-    rail, hedge = rail_and(touching)
-    assert rail.all() and not hedge.any()
-    for narrow, params in (((2.1, 2.45, 0.1, 1.3), {}), (touching, {"behind_wide_m": np.inf})):
+    them, but it spans 0.1 m or more across (``behind_wide_m``), as does the 0.15 m face of
+    one seen from across the road; a thinner thing touching the rail's back, or the rule for
+    wide things off, keeps it."""
+    for touching in ((2.1, 2.8, 0.1, 1.3), (2.1, 2.25, 0.1, 1.0)):
+        rail, hedge = rail_and(touching)
+        assert rail.all() and not hedge.any()
+    for narrow, params in (((2.1, 2.17, 0.1, 1.3), {}), (touching, {"behind_wide_m": np.inf})):
         rail, other = rail_and(narrow, **params)
         assert rail.all() and other.all()
 
@@ -239,7 +240,7 @@ def test_a_rails_own_parts_behind_it_stay_guardrail() -> None:
 @pytest.mark.parametrize(
     "behind, slices, params",
     [
-        ((2.15, 2.5, 0.3, 1.0), range(10), {}),  # 5 cm behind: within behind_gap_m
+        ((2.15, 2.22, 0.3, 1.0), range(10), {}),  # 5 cm behind, narrower than behind_wide_m
         ((-2.9, -2.4, 0.0, 1.6), range(10), {}),  # across the path
         (HEDGE, range(10), {"behind_gap_m": float("inf")}),  # the rule off
         ((3.2, 3.4, 0.5, 1.1), range(10), {}),  # a barrier of its own, 1.1 m behind

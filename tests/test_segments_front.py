@@ -75,9 +75,9 @@ def test_clutter_in_front_of_a_rail_does_not_move_its_front() -> None:
 
 def test_a_beam_with_its_post_behind_stays_whole() -> None:
     """A W-beam 8.5 cm deep (300 points), its post 0.5-0.6 m behind its face (60 points) and
-    clutter in front (as in test_segments): wider than gap_width_m, and what lies behind the
-    front layer spans more than gap_piece_m, but holds fewer than front_behind_ratio times the
-    front's points."""
+    clutter in front (as in test_segments): what lies behind the front layer spans more than
+    front_behind_min_width_m across and front_behind_min_length_m along, but holds fewer than
+    front_behind_ratio times the front's points."""
     rng = np.random.default_rng(53)
     beam = rng.uniform(4.70, 4.785, 300)
     post = rng.uniform(5.2, 5.3, 60)
@@ -88,8 +88,7 @@ def test_a_beam_with_its_post_behind_stays_whole() -> None:
     )
     station = rng.uniform(0.0, 0.5, len(lateral))
     segments = slice_components(np.zeros(len(lateral), np.int64), station, PARAMS, lateral, height)
-    assert np.ptp(lateral) > PARAMS.gap_width_m
-    assert 5.2 - 4.70 - PARAMS.front_layer_m > PARAMS.gap_piece_m
+    assert 5.2 - 4.70 - PARAMS.front_layer_m > PARAMS.front_behind_min_width_m
     assert len(segments) == 1
 
 
@@ -139,3 +138,49 @@ def test_a_sparse_scans_few_hits_in_front_stay_with_the_rest() -> None:
     segments = slice_components(component, station, few, lateral, height)
     assert len(segments) == 2
     assert (segments.point_segment[rail] == 0).all()
+
+
+def _far_rail(
+    rng: np.random.Generator, behind_depth: tuple[float, float], behind_along: tuple[float, float]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """One slice of one component across the road: a pipe rail 5 m right of the path (two
+    pipes at 0.3 and 0.8 m, 80 points within 3 cm of its face) and 250 points behind it,
+    ``behind_depth`` metres behind its face and ``behind_along`` metres along the slice,
+    0.1-0.95 m high. Returns station, lateral, height (N,) and which points are the rail's."""
+    rail_depth = rng.uniform(0.0, 0.03, 80)
+    rail_height = np.concatenate([rng.normal(0.3, 0.01, 40), rng.normal(0.8, 0.01, 40)])
+    depth = np.concatenate([rail_depth, rng.uniform(*behind_depth, 250)])
+    height = np.concatenate([rail_height, rng.uniform(0.1, 0.95, 250)])
+    station = np.concatenate([rng.uniform(0.0, 0.5, 80), rng.uniform(*behind_along, 250)])
+    return station, -(5.0 + depth), height, np.repeat([True, False], [80, 250])
+
+
+@pytest.mark.parametrize("seed", [60, 61, 62])
+def test_the_face_of_a_hedge_behind_a_far_rail_is_cut_from_it(seed: int) -> None:
+    """Seen from across the road only the hedge's face, 0.15-0.35 m behind the rail, is
+    scanned: the slice is narrower than gap_width_m and what lies behind narrower than
+    gap_piece_m, yet it fills the slice along the path and outnumbers the rail."""
+    station, lateral, height, rail = _far_rail(np.random.default_rng(seed), (0.15, 0.35), (0, 0.5))
+    assert np.ptp(lateral) < PARAMS.gap_width_m
+    segments = slice_components(np.zeros(len(lateral), np.int64), station, PARAMS, lateral, height)
+    assert len(segments) == 2
+    np.testing.assert_array_equal(segments.point_segment, np.where(rail, 0, 1))
+    assert segments.component[0] != segments.component[1]
+
+
+@pytest.mark.parametrize("seed", [63, 64, 65])
+def test_a_thick_post_behind_a_rail_stays_with_it(seed: int) -> None:
+    """A post 0.08-0.25 m behind the rail's face holding three times the rail's points (a near
+    pole, densely scanned) is as deep as a hedge's face but 0.12 m thick along the path: the
+    slice stays whole, even with a few stray hits behind the rail along the whole slice. Asking
+    for less length cuts it, so the length is what keeps it."""
+    rng = np.random.default_rng(seed)
+    station, lateral, height, _ = _far_rail(rng, (0.08, 0.25), (0.19, 0.31))
+    stray = 3
+    station = np.concatenate([station, rng.uniform(0.0, 0.5, stray)])
+    lateral = np.concatenate([lateral, -5.0 - rng.uniform(0.1, 0.3, stray)])
+    height = np.concatenate([height, rng.uniform(0.1, 0.9, stray)])
+    component = np.zeros(len(lateral), np.int64)
+    assert len(slice_components(component, station, PARAMS, lateral, height)) == 1
+    short = SegmentParams(front_behind_min_length_m=0.05)
+    assert len(slice_components(component, station, short, lateral, height)) == 2

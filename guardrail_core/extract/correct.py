@@ -117,15 +117,16 @@ class CorrectionParams(StageParams):
         "the near one with a hedge between",
     )
     behind_wide_m: float = param(
-        0.4,
+        0.1,
         unit="m",
         gt=0,
         finite=False,
         doc="a guardrail segment spanning at least this much across the path stands behind a "
         "run of another component with no gap at all: a hedge or a bush that touches the back "
-        "of a rail (SegmentParams.front_layer_m cuts it from the rail as a component of its "
-        "own). A rail's slice, posts included, is narrower; inf asks every segment for "
-        "behind_gap_m",
+        "of a rail, or the face of one just behind it seen from across the road "
+        "(SegmentParams.front_layer_m cuts it from the rail as a component of its own when it "
+        "spans front_behind_min_width_m, 0.1 m, or more). A rail's posts and back rail are of "
+        "its own component; inf asks every segment for behind_gap_m",
     )
     behind_front_min_slices: int = param(
         4,

@@ -154,11 +154,32 @@ class SegmentParams(StageParams):
         unit="m",
         ge=0,
         le=100,
-        doc="a slice (or piece) wider than gap_width_m with no gap in it is also cut this far "
-        "behind its front (the side nearest the trajectory) when what lies behind spans "
-        "gap_piece_m or more across: a hedge or a bush that touches the back of a rail. The part "
-        "behind becomes a component of its own (the wireframe joined two objects); 0 turns this "
-        "off",
+        doc="a slice (or piece) is also cut this far behind its front (the side nearest the "
+        "trajectory) where what lies behind is a mass of its own: it spans "
+        "front_behind_min_width_m across and front_behind_min_length_m along the slice, and "
+        "holds front_behind_ratio times the front's points. A hedge or a bush that touches the "
+        "back of a rail, or stands just behind it: seen from across the road, only its face, "
+        "0.1-0.4 m deep, and the rail make the slice. The part behind becomes a component of "
+        "its own (the wireframe joined two objects); 0 turns this off",
+    )
+    front_behind_min_width_m: float = param(
+        0.1,
+        unit="m",
+        ge=0,
+        le=100,
+        doc="a slice is cut behind its front (front_layer_m) only where what lies behind spans "
+        "at least this much across: the face of a hedge seen from across the road spans "
+        "0.1-0.4 m",
+    )
+    front_behind_min_length_m: float = param(
+        0.25,
+        unit="m",
+        ge=0,
+        le=100,
+        doc="a slice is cut behind its front (front_layer_m) only where what lies behind spans "
+        "at least this much along the trajectory (from a tenth to nine tenths of its points, "
+        "so a stray point does not stretch it): a hedge fills the 0.5 m slice, while a pole "
+        "or a beam's post behind the rail's face is at most 0.15 m thick",
     )
     front_min_height_m: float = param(
         0.25,
@@ -179,7 +200,7 @@ class SegmentParams(StageParams):
         "little shape to judge apart from the rest",
     )
     front_behind_ratio: float = param(
-        2.0,
+        1.5,
         gt=0,
         le=1000,
         doc="a slice is cut behind its front (front_layer_m) only where what lies behind holds "
@@ -437,7 +458,7 @@ def slice_components(
     point_component = component.astype(np.int32)
     if height is not None and across is not None and params.front_layer_m > 0:
         up = np.asarray(height, np.float64)[kept]
-        behind = _behind_front(segment_of_kept, across, up, params)
+        behind = _behind_front(segment_of_kept, across, up, station[kept], params)
         if behind.any():
             # What lies behind a front is another object: a component of its own (one for each
             # component it was cut from), so label correction tells the two apart.
@@ -563,17 +584,23 @@ def _gap_pieces(
 
 
 def _behind_front(
-    segment: np.ndarray, lateral: np.ndarray, height: np.ndarray, params: SegmentParams
+    segment: np.ndarray,
+    lateral: np.ndarray,
+    height: np.ndarray,
+    station: np.ndarray,
+    params: SegmentParams,
 ) -> np.ndarray:
-    """(K,) bool: the points of wide slices that lie ``front_layer_m`` or more behind their
-    slice's front, where those points span ``gap_piece_m`` or more across and hold
-    ``front_behind_ratio`` times the points in front of them or more, and where the points in
-    front, at least ``front_min_points`` of them, span ``front_min_height_m`` or more in height.
+    """(K,) bool: the points of slices that lie ``front_layer_m`` or more behind their slice's
+    front, where those points span ``front_behind_min_width_m`` or more across and
+    ``front_behind_min_length_m`` or more along the trajectory and hold ``front_behind_ratio``
+    times the points in front of them or more, and where the points in front, at least
+    ``front_min_points`` of them, span ``front_min_height_m`` or more in height.
 
-    A slice is wide when it spans more than ``gap_width_m`` across. Its front lies in its bin
-    (``width_bin_m``) nearest the trajectory (on the slice's side) of those that hold more than
-    ``valley_share`` of the fullest bin's points, at the point ``valley_share`` of the way into
-    that bin's points by depth: a sparse scan's clutter in front of a rail does not move it.
+    ``segment``, ``lateral``, ``height``, ``station``: (K,) per kept point (metres). A slice's
+    front lies in its bin (``width_bin_m``) nearest the trajectory (on the slice's side) of
+    those that hold more than ``valley_share`` of the fullest bin's points, at the point
+    ``valley_share`` of the way into that bin's points by depth: a sparse scan's clutter in
+    front of a rail does not move it.
     """
     behind = np.zeros(len(segment), bool)
     if len(segment) == 0:
@@ -582,11 +609,13 @@ def _behind_front(
     side = np.where(np.bincount(segment, weights=lateral, minlength=n_seg) < 0, -1.0, 1.0)
     depth = lateral * side[segment]  # metres from the trajectory on the slice's side
     low, high = _lateral_bounds(segment, depth)
-    wide = np.flatnonzero(high - low > params.gap_width_m)
-    if len(wide) == 0:
+    # Only slices deep enough to hold a front layer and a mass behind it are binned.
+    deep_m = params.front_layer_m + params.front_behind_min_width_m
+    deep = np.flatnonzero(high - low >= deep_m - _ROUNDING_M)
+    if len(deep) == 0:
         return behind
     _, _, members, cell, counts, owner = _bins_across(
-        segment, depth, (low, high), wide, params.width_bin_m
+        segment, depth, (low, high), deep, params.width_bin_m
     )
     s, d = segment[members], depth[members]
     fullest = np.zeros(n_seg, np.int64)
@@ -614,13 +643,38 @@ def _behind_front(
     np.maximum.at(top, s[~back], front_height)
     np.minimum.at(bottom, s[~back], front_height)
     cut = (
-        (high - back_low >= params.gap_piece_m - _ROUNDING_M)
+        (high - back_low >= params.front_behind_min_width_m - _ROUNDING_M)
         & (n_back >= params.front_behind_ratio * n_front)
         & (n_front >= params.front_min_points)
         & (top - bottom >= params.front_min_height_m)
     )
+    cut &= _along_span(s[back], station[members][back], n_seg) >= (
+        params.front_behind_min_length_m - _ROUNDING_M
+    )
     behind[members] = back & cut[s]
     return behind
+
+
+#: Share of a group's points left out at either end of its span along the trajectory (a
+#: stray point does not stretch it).
+_SPAN_TAIL = 0.1
+
+
+def _along_span(group: np.ndarray, station: np.ndarray, n_groups: int) -> np.ndarray:
+    """(n_groups,) metres along the trajectory from the point ``_SPAN_TAIL`` of the way into
+    each group's points (by ``station`` (M,), metres; ``group`` (M,) int) to the one as far
+    from the end; 0 for a group with no points."""
+    span = np.zeros(n_groups)
+    if len(group) == 0:
+        return span
+    order = np.lexsort((station, group))
+    g, st = group[order], station[order]
+    starts = np.flatnonzero(np.concatenate([[True], g[1:] != g[:-1]]))
+    size = np.diff(np.append(starts, len(g)))
+    lo = starts + (_SPAN_TAIL * (size - 1)).astype(np.int64)
+    hi = starts + ((1 - _SPAN_TAIL) * (size - 1)).astype(np.int64)
+    span[g[starts]] = st[hi] - st[lo]
+    return span
 
 
 def _lateral_bounds(segment: np.ndarray, lateral: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
