@@ -222,10 +222,11 @@ def test_a_hedge_touching_the_back_of_a_rail_becomes_other() -> None:
     them, but it spans 0.1 m or more across (``behind_wide_m``), as does the 0.15 m face of
     one seen from across the road; a thinner thing touching the rail's back, or the rule for
     wide things off, keeps it."""
-    for touching in ((2.1, 2.8, 0.1, 1.3), (2.1, 2.25, 0.1, 1.0)):
+    hedge_back, hedge_face = (2.1, 2.8, 0.1, 1.3), (2.1, 2.25, 0.1, 1.0)
+    for touching in (hedge_back, hedge_face):
         rail, hedge = rail_and(touching)
         assert rail.all() and not hedge.any()
-    for narrow, params in (((2.1, 2.17, 0.1, 1.3), {}), (touching, {"behind_wide_m": np.inf})):
+    for narrow, params in (((2.1, 2.17, 0.1, 1.3), {}), (hedge_face, {"behind_wide_m": np.inf})):
         rail, other = rail_and(narrow, **params)
         assert rail.all() and other.all()
 
