@@ -625,12 +625,7 @@ def _behind_front(
     nearest = np.full(n_seg, np.iinfo(np.int64).max)
     np.minimum.at(nearest, s[dense[cell]], cell[dense[cell]])
     mine = np.flatnonzero(cell == nearest[s])
-    mine = mine[np.lexsort((d[mine], s[mine]))]
-    starts = np.flatnonzero(np.concatenate([[True], s[mine][1:] != s[mine][:-1]]))
-    size = np.diff(np.append(starts, len(mine)))
-    rank = starts + (params.valley_share * (size - 1)).astype(np.int64)
-    front = np.full(n_seg, np.inf)
-    front[s[mine][starts]] = d[mine][rank]
+    (front,) = _group_shares(s[mine], d[mine], (params.valley_share,), n_seg, np.inf)
     back = d - front[s] >= params.front_layer_m
     # The nearest point behind each slice's front layer, and how many lie behind and before.
     back_low = np.full(n_seg, np.inf)
@@ -648,33 +643,41 @@ def _behind_front(
         & (n_front >= params.front_min_points)
         & (top - bottom >= params.front_min_height_m)
     )
-    cut &= _along_span(s[back], station[members][back], n_seg) >= (
-        params.front_behind_min_length_m - _ROUNDING_M
+    # How far what lies behind spans along the trajectory, its tails left out (a stray point
+    # does not stretch it).
+    first, last = _group_shares(
+        s[back], station[members][back], (_SPAN_TAIL, 1 - _SPAN_TAIL), n_seg, 0.0
     )
+    cut &= last - first >= params.front_behind_min_length_m - _ROUNDING_M
     behind[members] = back & cut[s]
     return behind
 
 
-#: Share of a group's points left out at either end of its span along the trajectory (a
-#: stray point does not stretch it).
+#: Share of the points behind a slice's front left out at either end of their span along the
+#: trajectory.
 _SPAN_TAIL = 0.1
 
 
-def _along_span(group: np.ndarray, station: np.ndarray, n_groups: int) -> np.ndarray:
-    """(n_groups,) metres along the trajectory from the point ``_SPAN_TAIL`` of the way into
-    each group's points (by ``station`` (M,), metres; ``group`` (M,) int) to the one as far
-    from the end; 0 for a group with no points."""
-    span = np.zeros(n_groups)
+def _group_shares(
+    group: np.ndarray,
+    value: np.ndarray,
+    shares: tuple[float, ...],
+    n_groups: int,
+    empty: float,
+) -> np.ndarray:
+    """(len(shares), n_groups): for each share, the value that share of the way into each
+    group's values sorted (the floor of ``share * (size - 1)``); ``empty`` for a group with
+    none. ``group`` (M,) int in [0, n_groups), ``value`` (M,) float."""
+    out = np.full((len(shares), n_groups), empty, np.float64)
     if len(group) == 0:
-        return span
-    order = np.lexsort((station, group))
-    g, st = group[order], station[order]
+        return out
+    order = np.lexsort((value, group))
+    g, v = group[order], value[order]
     starts = np.flatnonzero(np.concatenate([[True], g[1:] != g[:-1]]))
     size = np.diff(np.append(starts, len(g)))
-    lo = starts + (_SPAN_TAIL * (size - 1)).astype(np.int64)
-    hi = starts + ((1 - _SPAN_TAIL) * (size - 1)).astype(np.int64)
-    span[g[starts]] = st[hi] - st[lo]
-    return span
+    for row, share in enumerate(shares):  # one or two shares
+        out[row, g[starts]] = v[starts + (share * (size - 1)).astype(np.int64)]
+    return out
 
 
 def _lateral_bounds(segment: np.ndarray, lateral: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
