@@ -1,5 +1,7 @@
 """Beam detection and section curves (Matsumoto et al. 2019, §4.4)."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -89,6 +91,49 @@ def test_unit_type_tells_beams_from_pipes():
     assert unit_type(np.vstack(rails), 2.0) == "pipe"
 
 
+UNIT_TYPES = Path(__file__).parent / "data" / "unit_types_dev_streets.npz"
+
+
+def _superimposed(name: str) -> tuple[np.ndarray, float]:
+    data = np.load(UNIT_TYPES)
+    return data[f"{name}_points_mm"] / 1000.0, float(data[f"{name}_length"])
+
+
+@pytest.mark.parametrize("name", ["pipe_wave", "pipe_diagonal_x", "pipe_diamond"])
+def test_pipes_crossing_every_column_are_no_beam(name):
+    # Superimposed units of simulated streets (tests/data/README.md). Where a rail and the
+    # trough of a wave, or the ends of diagonals near a rail, blur into one band 0.2 m tall,
+    # the rows look filled; a hedge behind the diamond fills them more. Every column still
+    # leaves a gap of 0.12 m or more between the pipes.
+    points, length = _superimposed(name)
+    assert unit_type(points, length) == "pipe"
+    # Without the gap test the unit is typed beam: the gap test is what tells.
+    assert unit_type(points, length, BeamParams(max_column_gap_m=2.0)) == "beam"
+
+
+def test_thrie_beam_with_shadowed_valleys_stays_a_beam():
+    # A thrie beam of a simulated street whose shadowed valleys leave the tallest gaps of the
+    # development streets' beams (~0.08 m).
+    points, length = _superimposed("beam_thrie")
+    assert unit_type(points, length) == "beam"
+    assert unit_type(points, length, BeamParams(max_column_gap_m=0.05)) == "pipe"
+
+
+def test_beam_scanned_in_sparse_lines_stays_a_beam():
+    # A multi-beam scanner's lines cross a W-beam nearly level, 4.5 cm apart (as on the KITTI
+    # motorway): a column holds a point every 4.5 cm, and no taller gap.
+    rng = np.random.default_rng(5)
+    truth = _section_truth()
+    heights = np.arange(truth[0, 1], truth[-1, 1], 0.045)
+    lines = []
+    for y0 in heights:
+        x = rng.uniform(0.0, LENGTH, 1000)
+        y = y0 + 0.01 * x / LENGTH + rng.normal(0, 0.003, len(x))
+        z = np.interp(y, truth[:, 1], truth[:, 0]) + rng.normal(0, 0.005, len(x))
+        lines.append(np.column_stack([x, y, z]))
+    assert unit_type(np.vstack(lines), LENGTH) == "beam"
+
+
 def test_no_points_give_a_note():
     rec = reconstruct_beam(np.zeros((0, 3)), LENGTH, POST_R)
     assert rec.section.shape == (0, 2) and rec.notes
@@ -127,6 +172,8 @@ def test_bad_unit_raises(length, pole_radius):
         {"min_points": 0},
         {"min_x_spread": 1.0},
         {"max_band_gap_m": -0.1},
+        {"max_column_gap_m": 0.0},
+        {"gap_column_points": 0},
     ],
 )
 def test_params_out_of_range_raise(kwargs):

@@ -112,6 +112,45 @@ class BeamParams(StageParams):
         doc="The share of the unit's heights, around their median, whose points tell an open "
         "fence from a beam (rails above and below would cover every x).",
     )
+    gap_column_m: float = param(
+        0.1,
+        unit="m",
+        gt=0,
+        le=1.0,
+        doc="Width of the x columns of the gap test of :func:`unit_type`.",
+    )
+    max_column_gap_m: float = param(
+        0.11,
+        unit="m",
+        gt=0,
+        le=2.0,
+        doc="A beam's plate leaves no gap in height taller than a shadowed corrugation valley "
+        "(under 0.1 m) in any x column; pipes leave gaps between them in every column, "
+        "however densely superimposition fills the rows where they cross (a wave, diagonals, "
+        "a diamond lattice). When the tallest gap of the median column exceeds this, the unit "
+        "is a pipe fence.",
+    )
+    gap_height_share: float = param(
+        0.9,
+        gt=0,
+        le=1,
+        doc="The gap test spans this share of the points' heights around their median (the "
+        "ends count as the edges of a gap).",
+    )
+    gap_depth_m: float = param(
+        0.1,
+        unit="m",
+        gt=0,
+        le=1.0,
+        doc="The gap test counts only points within this depth (z) of the points' median depth: "
+        "a beam's plate is under 0.1 m deep, while a hedge seen through a pipe fence would "
+        "fill its gaps.",
+    )
+    gap_column_points: int = param(
+        10,
+        ge=1,
+        doc="Points. Columns with fewer points take no part in the gap test.",
+    )
     # -- the section curve: 10 mm slices, smoothed (§4.4) ----------------------------------------
     pole_margin_m: float = param(
         0.05,
@@ -292,7 +331,9 @@ def unit_type(points: np.ndarray, length: float, params: BeamParams = BeamParams
 
     Returns
     -------
-    "beam" when a region of at least ``min_height_m`` is filled by points, else "pipe".
+    "beam" when a region of at least ``min_height_m`` is filled by points, no more than
+    ``max_open_share`` of the x bins are open and the median x column leaves no gap in height
+    taller than ``max_column_gap_m`` (a plate's); else "pipe".
 
     Raises
     ------
@@ -308,7 +349,9 @@ def unit_type(points: np.ndarray, length: float, params: BeamParams = BeamParams
     length = _check_length(length)
     if _filled_height(pts, length, params) < params.min_height_m:
         return "pipe"
-    return "beam" if _open_share(pts, length, params) <= params.max_open_share else "pipe"
+    if _open_share(pts, length, params) > params.max_open_share:
+        return "pipe"
+    return "beam" if _column_gap(pts, length, params) <= params.max_column_gap_m else "pipe"
 
 
 def _open_share(points: np.ndarray, length: float, params: BeamParams) -> float:
@@ -330,6 +373,46 @@ def _open_share(points: np.ndarray, length: float, params: BeamParams) -> float:
         np.minimum(((x - p.type_margin_m) / width).astype(np.int64), n_bins - 1), minlength=n_bins
     )
     return float((counts == 0).mean())
+
+
+def _column_gap(points: np.ndarray, length: float, params: BeamParams) -> float:
+    """Metres: the tallest gap in height between the points of the median x column
+    (``gap_column_m`` wide, between the margins), among the points near the unit's median depth
+    and within its ``gap_height_share`` of heights (see :class:`BeamParams`).
+
+    A beam's plate leaves gaps of its scan lines' spacing, or of a shadowed valley (under
+    0.1 m); pipes leave the space between them in every column (0.12-0.35 m for a wave,
+    crossing diagonals or a diamond lattice). 0.0 when no column holds ``gap_column_points``.
+    """
+    p = params
+    x, y, z = points[:, 0], points[:, 1], points[:, 2]
+    keep = (x > p.type_margin_m) & (x < length - p.type_margin_m)
+    if keep.any():
+        keep &= np.abs(z - np.median(z[keep])) <= p.gap_depth_m
+    x, y = x[keep], y[keep]
+    if len(x) == 0:
+        return 0.0
+    half = 50 * p.gap_height_share  # percent either side of the median
+    low, high = np.percentile(y, [50 - half, 50 + half])
+    within = (y >= low) & (y <= high)
+    x, y = x[within], y[within]
+    n_cols = max(1, int(math.ceil((length - 2 * p.type_margin_m) / p.gap_column_m)))
+    col = np.minimum(((x - p.type_margin_m) / p.gap_column_m).astype(np.int64), n_cols - 1)
+    order = np.lexsort((y, col))
+    col, y = col[order], y[order]
+    counts = np.bincount(col, minlength=n_cols)
+    used = np.flatnonzero(counts >= p.gap_column_points)
+    if len(used) == 0:
+        return 0.0
+    # Each point's gap to the point below it in its column (the lowest's: to ``low``), and
+    # the gap from each column's highest point up to ``high``.
+    first = np.cumsum(counts) - counts
+    below = np.concatenate([[low], y[:-1]])
+    below[first[counts > 0]] = low
+    tallest = np.zeros(n_cols)
+    np.maximum.at(tallest, col, y - below)
+    top = high - y[first[used] + counts[used] - 1]
+    return float(np.median(np.maximum(tallest[used], top)))
 
 
 def reconstruct_beam(
