@@ -257,6 +257,27 @@ def test_a_king_post_under_a_rail_whose_points_miss_its_side_is_found(seed, monk
     assert [q.kind for q in alone.pipes].count("vertical") == 0
 
 
+def test_a_king_post_whose_ends_the_rail_and_the_arch_take_is_found():
+    # A pipe_arch run of a development street (tests/data/README.md), 8 units, 6 of them
+    # left at their rough alignment: the top rail's band and the arch's crown take the king
+    # post's ends, and the 4.5 cm of points left between them, 2 cm wide, lean at random. A
+    # line fitted to them and stretched over the post's 0.12 m drifted 3.4 cm; its points'
+    # lowest and highest thirds stand 8 mm apart.
+    data = np.load(Path(__file__).parent / "data" / "arch_king_post_dev622.npz")
+    pts = data["points_mm"] / 1000.0
+    rec = reconstruct_pipes(pts, float(data["length"]), float(data["pole_radius"]))
+    assert [q.kind for q in rec.pipes] == [
+        "horizontal",
+        "horizontal",
+        "vertical",
+        "curved",
+        "curved",
+    ]
+    [king] = [q for q in rec.pipes if q.kind == "vertical"]
+    assert abs(king.axis[0, 0] - 1.0) < 0.01
+    assert np.abs(np.sort(king.axis[:, 1]) - [0.75, 0.9]).max() < 0.03
+
+
 def test_no_points_gives_a_note_not_a_crash():
     rec = reconstruct_pipes(np.zeros((0, 3)), LENGTH, POLE_R)
     assert rec.pipes == () and rec.notes
