@@ -9,7 +9,9 @@ from guardrail_core.errors import ReconstructionError
 from guardrail_core.params import ParameterError
 from guardrail_core.reconstruct.pipes import PipeParams, reconstruct_pipes
 from guardrail_core.reconstruct.pipes.crossings import uncross
+from guardrail_core.reconstruct.pipes.curve_pieces import curve_stretches, stretch_turn_deg
 from guardrail_core.reconstruct.pipes.measure import radius_and_axis
+from guardrail_core.reconstruct.pipes.skeleton import Skeleton
 from guardrail_core.reconstruct.pipes.slices import slice_labels
 from guardrail_core.reconstruct.pipes.tracking import Centre, Track
 
@@ -276,6 +278,41 @@ def test_a_king_post_whose_ends_the_rail_and_the_arch_take_is_found():
     [king] = [q for q in rec.pipes if q.kind == "vertical"]
     assert abs(king.axis[0, 0] - 1.0) < 0.01
     assert np.abs(np.sort(king.axis[:, 1]) - [0.75, 0.9]).max() < 0.03
+
+
+def test_a_wave_whose_flank_the_line_search_took_is_one_curve():
+    # A pipe_wave run of a development street (tests/data/README.md): the line search took the
+    # flank from the first crest to the trough, 0.4 m leaning 45°, as a straight pipe, and the
+    # chains either side of it were two pieces of the wave, neither of them the pipe.
+    data = np.load(Path(__file__).parent / "data" / "wave_dev645.npz")
+    length = float(data["length"])
+    rec = reconstruct_pipes(data["points_mm"] / 1000.0, length, float(data["pole_radius"]))
+    assert [q.kind for q in rec.pipes] == ["horizontal", "horizontal", "curved"]
+    wave = rec.pipes[2]
+    assert wave.axis[0, 0] == pytest.approx(0.0, abs=0.01)
+    assert wave.axis[-1, 0] == pytest.approx(length, abs=0.01)
+    x = np.linspace(0.05, 1.95, 200)
+    truth = 0.525 + 0.2 * np.sin(2 * np.pi * x)  # the design: 2 periods per 2 m unit
+    assert np.abs(np.interp(x, wave.axis[:, 0], wave.axis[:, 1]) - truth).max() < 0.02
+    assert abs(wave.radius - 0.0136) < 0.002
+
+
+def _skeleton(xy, kind):
+    return Skeleton(xy=np.asarray(xy, np.float64), kind=kind, idx=np.zeros(0, np.int64))
+
+
+def test_a_diagonal_is_a_curve_stretch_where_a_curve_levels_into_it_not_at_a_lattice_corner():
+    line = _skeleton([[0.3, 0.7], [0.7, 0.3]], "diagonal")
+    crest = _skeleton([[0.05, 0.6], [0.1, 0.66], [0.18, 0.72], [0.28, 0.72]], "curved")
+    assert stretch_turn_deg(line, crest, PipeParams()) == pytest.approx(45.0, abs=0.5)
+    assert curve_stretches([line], [crest], PipeParams()) == [0]
+    # Two straight pipes of a diamond lattice meet at a right angle.
+    corner = _skeleton([[0.0, 0.4], [0.1, 0.5], [0.2, 0.6], [0.28, 0.68]], "curved")
+    assert stretch_turn_deg(line, corner, PipeParams()) == pytest.approx(90.0, abs=0.5)
+    assert curve_stretches([line], [corner], PipeParams()) == []
+    # An end farther than link_gap_m does not lead into the line.
+    away = _skeleton(crest.xy - [0.2, 0.0], "curved")
+    assert stretch_turn_deg(line, away, PipeParams()) == 180.0
 
 
 def test_no_points_gives_a_note_not_a_crash():

@@ -22,7 +22,10 @@ The steps follow §4.3, one module each:
 4. centres of consecutive slices are joined into polylines (Fig. 16 d, :mod:`.tracking`),
    predicting along the current direction so that crossing pipes continue straight through the
    crossing; where one still bounced off the other (an X linked as a Λ and two halves), they are
-   re-linked (:mod:`.crossings`); :mod:`.chains` runs 3 and 4;
+   re-linked (:mod:`.crossings`); :mod:`.chains` runs 3 and 4; a diagonal line that a curved
+   chain levels into (a wave's flank, which the line search took as straight) is given back
+   and the curve chained again, kept when the curve then runs along it and past both its ends
+   (:mod:`.curve_pieces`);
 5. polylines are smoothed by Taubin's low-pass filter, fitted by a straight line when nearly
    straight, snapped to horizontal when nearly horizontal (:mod:`.shaping`); pieces of one pipe
    are merged (:mod:`.merging`);
@@ -46,6 +49,7 @@ import numpy as np
 from guardrail_core.errors import ReconstructionError
 from guardrail_core.reconstruct.model import PIPE_KINDS, Pipe
 from guardrail_core.reconstruct.pipes.chains import chained_pipes
+from guardrail_core.reconstruct.pipes.curve_pieces import curve_stretches, runs_along_a_curve
 from guardrail_core.reconstruct.pipes.histogram import PipeHistogram, x_histogram
 from guardrail_core.reconstruct.pipes.inputs import check_length, check_unit_points
 from guardrail_core.reconstruct.pipes.joining import extend_and_join
@@ -54,6 +58,7 @@ from guardrail_core.reconstruct.pipes.measure import measure_pipes
 from guardrail_core.reconstruct.pipes.params import PipeParams
 from guardrail_core.reconstruct.pipes.rails import cut_back, runs_along
 from guardrail_core.reconstruct.pipes.short_verticals import short_verticals
+from guardrail_core.reconstruct.pipes.skeleton import Skeleton
 from guardrail_core.reconstruct.pipes.verticals import vertical_pipes
 
 __all__ = [
@@ -158,17 +163,19 @@ def reconstruct_pipes(
     short, short_mask = short_verticals(pts, rest_idx, lines, histogram.edges, p)
     verticals += short
     rest_idx = rest_idx[~short_mask]
-    others, n_short = chained_pipes(pts, rest_idx, x0, p)
+    rails, others, n_short = _chained_and_cut_back(pts, rest_idx, lines, x0, length, p)
+    # A diagonal line that a curved chain continues may be a straight stretch of that curve (a
+    # wave's flank): its points go back, and it was one when the curve, chained again, runs
+    # along it.
+    for stretch in [lines[i] for i in curve_stretches(lines, others, p)]:
+        trial_lines = [line for line in lines if line is not stretch]
+        trial_rest = np.union1d(rest_idx, stretch.idx)
+        trial = _chained_and_cut_back(pts, trial_rest, trial_lines, x0, length, p)
+        if runs_along_a_curve(stretch, trial[1], (x0, x1), p):
+            lines, rest_idx = trial_lines, trial_rest
+            rails, others, n_short = trial
     if n_short:
         notes.append(f"{n_short} short or sparse point chains were not taken as pipes")
-
-    rails = lines + [s for s in others if s.kind == "horizontal" and not runs_along(s, lines, p)]
-    others = [s for s in others if s.kind != "horizontal"]
-    for s in others:
-        cut_back(s, rails, length, pts, p)
-    # A chain is a rail's duplicate when it still runs along one once its ends along rails are
-    # cut: a diagonal that took over a rail's points past its junction is not.
-    others = [s for s in others if not runs_along(s, lines, p)]
     skels = verticals + rails + others
     # §4.3: ends extended to the poles, and to the intersection of close ends.
     extend_and_join(skels, length, p)
@@ -189,3 +196,25 @@ def reconstruct_pipes(
         key=lambda q: (PIPE_KINDS.index(q.kind), -float(q.axis[:, 1].mean()), float(q.axis[0, 0]))
     )
     return PipeReconstruction(tuple(pipes), histogram, tuple(notes))
+
+
+def _chained_and_cut_back(
+    pts: np.ndarray,
+    rest_idx: np.ndarray,
+    lines: list[Skeleton],
+    x0: float,
+    length: float,
+    p: PipeParams,
+) -> tuple[list[Skeleton], list[Skeleton], int]:
+    """The straight pipes with the horizontal chains that are rails of their own, the other
+    chains (their ends along a rail cut back, a rail's duplicates gone), and how many chains
+    were too short or sparse (see :func:`chained_pipes`)."""
+    others, n_short = chained_pipes(pts, rest_idx, x0, p)
+    rails = lines + [s for s in others if s.kind == "horizontal" and not runs_along(s, lines, p)]
+    others = [s for s in others if s.kind != "horizontal"]
+    for s in others:
+        cut_back(s, rails, length, pts, p)
+    # A chain is a rail's duplicate when it still runs along one once its ends along rails are
+    # cut: a diagonal that took over a rail's points past its junction is not.
+    others = [s for s in others if not runs_along(s, lines, p)]
+    return rails, others, n_short
