@@ -208,6 +208,22 @@ def _arch_design(rng, top, post, arch_points):
     )
 
 
+def _arch_king_post(rec, x_tol=0.005):
+    """The king post of a reconstructed pipe_arch unit: two rails, the post and two arches
+    (asserted), the post at x = 1 m from 0.75 to 0.9 m."""
+    assert [q.kind for q in rec.pipes] == [
+        "horizontal",
+        "horizontal",
+        "vertical",
+        "curved",
+        "curved",
+    ]
+    [king] = [q for q in rec.pipes if q.kind == "vertical"]
+    assert abs(king.axis[0, 0] - 1.0) < x_tol
+    assert np.abs(np.sort(king.axis[:, 1]) - [0.75, 0.9]).max() < 0.03
+    return king
+
+
 @pytest.mark.parametrize("seed", range(6))
 def test_an_arch_king_post_is_found_from_few_units(seed):
     # The design pipe_arch from 8 superimposed units: a 0.15 m king post between the outer
@@ -218,12 +234,7 @@ def test_an_arch_king_post_is_found_from_few_units(seed):
     post[:, 0] += np.repeat(rng.uniform(-0.005, 0.005, 8), 8)
     top = _pipe_points(rng, [0, 0.9], [LENGTH, 0.9], 0.0243, 1600)
     pts = _arch_design(rng, top, post, (1000, 700))
-    rec = reconstruct_pipes(pts, LENGTH, POLE_R)
-    kinds = [p.kind for p in rec.pipes]
-    assert kinds == ["horizontal", "horizontal", "vertical", "curved", "curved"]
-    [king] = [p for p in rec.pipes if p.kind == "vertical"]
-    assert abs(king.axis[0, 0] - 1.0) < 0.005
-    assert np.abs(np.sort(king.axis[:, 1]) - [0.75, 0.9]).max() < 0.03
+    king = _arch_king_post(reconstruct_pipes(pts, LENGTH, POLE_R))
     assert abs(king.radius - 0.012) < 0.004
 
 
@@ -242,17 +253,7 @@ def test_a_king_post_under_a_rail_whose_points_miss_its_side_is_found(seed, monk
     top = _pipe_points(rng, [0, 0.9], [LENGTH, 0.9], 0.0243, 1600)
     top = top[(top[:, 0] < 1.025) | (top[:, 0] > 1.06)]  # no clump right of the post
     pts = _arch_design(rng, top, post, (700, 400))
-    rec = reconstruct_pipes(pts, LENGTH, POLE_R)
-    assert [q.kind for q in rec.pipes] == [
-        "horizontal",
-        "horizontal",
-        "vertical",
-        "curved",
-        "curved",
-    ]
-    [king] = [q for q in rec.pipes if q.kind == "vertical"]
-    assert abs(king.axis[0, 0] - 1.0) < 0.005
-    assert np.abs(np.sort(king.axis[:, 1]) - [0.75, 0.9]).max() < 0.03
+    _arch_king_post(reconstruct_pipes(pts, LENGTH, POLE_R))
     # Counting the rail's points alone misses it.
     monkeypatch.setattr(short_verticals, "_line_across", lambda *args: False)
     alone = reconstruct_pipes(pts, LENGTH, POLE_R)
@@ -268,16 +269,7 @@ def test_a_king_post_whose_ends_the_rail_and_the_arch_take_is_found():
     data = np.load(Path(__file__).parent / "data" / "arch_king_post_dev622.npz")
     pts = data["points_mm"] / 1000.0
     rec = reconstruct_pipes(pts, float(data["length"]), float(data["pole_radius"]))
-    assert [q.kind for q in rec.pipes] == [
-        "horizontal",
-        "horizontal",
-        "vertical",
-        "curved",
-        "curved",
-    ]
-    [king] = [q for q in rec.pipes if q.kind == "vertical"]
-    assert abs(king.axis[0, 0] - 1.0) < 0.01
-    assert np.abs(np.sort(king.axis[:, 1]) - [0.75, 0.9]).max() < 0.03
+    _arch_king_post(rec, x_tol=0.01)
 
 
 def test_a_wave_whose_flank_the_line_search_took_is_one_curve():
