@@ -378,8 +378,8 @@ class PipeParams(StageParams):
         doc="A diagonal straight pipe with a curved chain's end within link_gap_m of one of its "
         "ends, turning from the chain's direction by at most this, is a straight stretch of "
         "the curve (a wave's flank, 45° between crests and troughs where the chain's ends "
-        "level out: up to ~65°); its points are chained again with the curve's. Where two "
-        "straight pipes of a lattice meet, they turn by 90°.",
+        "level out: 43-69° on the development streets' waves); its points are chained again "
+        "with the curve's. Where two straight pipes of a lattice meet, they turn by 90°.",
     )
     merge_angle_deg: float = param(
         50.0,
