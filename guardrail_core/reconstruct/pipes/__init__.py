@@ -32,7 +32,9 @@ The steps follow §4.3, one module each:
 6. a chain's end that runs on along a rail past their junction is cut and given back to the
    rail (the part left shaped again, straight or curved); what still runs along a rail is its
    duplicate and goes (:mod:`.rails`); ends near a pole are extended to the pole axis; ends near
-   another pipe are extended to their intersection (:mod:`.joining`);
+   another pipe are extended to their intersection (:mod:`.joining`); pieces of a curve whose
+   ends were joined end to start, where they run on smoothly, are one pipe (:mod:`.merging`: an
+   arch broken at its crown);
 7. the radius and the axis depth z of each pipe are measured from its points, per 0.1 m
    stretch along it (the median over the stretches: a junction sways a few of them;
    :mod:`.measure`).
@@ -55,6 +57,7 @@ from guardrail_core.reconstruct.pipes.inputs import check_length, check_unit_poi
 from guardrail_core.reconstruct.pipes.joining import extend_and_join
 from guardrail_core.reconstruct.pipes.line_search import straight_pipes
 from guardrail_core.reconstruct.pipes.measure import measure_pipes
+from guardrail_core.reconstruct.pipes.merging import merge_meetings
 from guardrail_core.reconstruct.pipes.params import PipeParams
 from guardrail_core.reconstruct.pipes.rails import cut_back, runs_along
 from guardrail_core.reconstruct.pipes.short_verticals import short_verticals
@@ -179,6 +182,7 @@ def reconstruct_pipes(
     skels = verticals + rails + others
     # §4.3: ends extended to the poles, and to the intersection of close ends.
     extend_and_join(skels, length, p)
+    skels = merge_meetings(skels, p)
     # Radius and depth of each pipe from its points.
     pipes = []
     for s, m in zip(skels, measure_pipes(pts, skels, p), strict=True):

@@ -112,3 +112,39 @@ def _can_merge(a: Skeleton, b: Skeleton, p: PipeParams, cos_turn: float, sin_lin
         return bool(ea @ sb >= cos_turn)
     step = step / n
     return bool(ea @ step >= cos_turn and sb @ step >= cos_turn)
+
+
+def merge_meetings(skels: list[Skeleton], p: PipeParams) -> list[Skeleton]:
+    """Join pieces of one curve that meet end to start once their ends were joined
+    (:func:`guardrail_core.reconstruct.pipes.joining.extend_and_join`): at least one of them
+    curved, neither horizontal nor vertical, the end and the start within ``slice_interval_m``
+    and the turn between them at most ``merge_angle_deg``. An arch whose chain ran up into a
+    king post too sparse to be found breaks at its crown; the two halves' ends are joined at
+    the crown, where they run on smoothly. Lattice pipes meeting at a corner turn by 90°."""
+    cos_turn = math.cos(math.radians(p.merge_angle_deg))
+    while True:
+        pair = _first_meeting(skels, p, cos_turn)
+        if pair is None:
+            return skels
+        i, j = pair
+        a, b = skels[i], skels[j]
+        skels[i] = Skeleton(
+            xy=np.vstack([a.xy, b.xy[1:]]), kind="curved", idx=np.union1d(a.idx, b.idx)
+        )
+        skels.pop(j)
+
+
+def _first_meeting(skels: list[Skeleton], p: PipeParams, cos_turn: float) -> tuple[int, int] | None:
+    for i, a in enumerate(skels):
+        for j, b in enumerate(skels):
+            if i == j or "curved" not in (a.kind, b.kind):
+                continue
+            if {a.kind, b.kind} & {"horizontal", "vertical"}:
+                continue
+            if float(np.linalg.norm(b.xy[0] - a.xy[-1])) > p.slice_interval_m:
+                continue
+            ea = end_direction(a.xy, p, end=True)
+            sb = -end_direction(b.xy, p, end=False)
+            if float(ea @ sb) >= cos_turn:
+                return i, j
+    return None
