@@ -173,10 +173,12 @@ def reconstruct_pipes(
     for stretch in [lines[i] for i in curve_stretches(lines, others, p)]:
         trial_lines = [line for line in lines if line is not stretch]
         trial_rest = np.union1d(rest_idx, stretch.idx)
-        trial = _chained_and_cut_back(pts, trial_rest, trial_lines, x0, length, p)
-        if runs_along_a_curve(stretch, trial[1], (x0, x1), p):
+        trial_rails, trial_others, trial_short = _chained_and_cut_back(
+            pts, trial_rest, trial_lines, x0, length, p
+        )
+        if runs_along_a_curve(stretch, trial_others, (x0, x1), p):
             lines, rest_idx = trial_lines, trial_rest
-            rails, others, n_short = trial
+            rails, others, n_short = trial_rails, trial_others, trial_short
     if n_short:
         notes.append(f"{n_short} short or sparse point chains were not taken as pipes")
     skels = verticals + rails + others

@@ -135,6 +135,8 @@ def merge_meetings(skels: list[Skeleton], p: PipeParams) -> list[Skeleton]:
 
 
 def _first_meeting(skels: list[Skeleton], p: PipeParams, cos_turn: float) -> tuple[int, int] | None:
+    """The first pair (i, j) whose end of ``skels[i]`` meets the start of ``skels[j]`` as
+    :func:`merge_meetings` joins them, or None."""
     for i, a in enumerate(skels):
         for j, b in enumerate(skels):
             if i == j or "curved" not in (a.kind, b.kind):
