@@ -190,6 +190,118 @@ def test_crops_beyond_the_reach_do_not_change_a_corrected_label(seed: int) -> No
     assert vetoed > 20  # the fixture exercises the veto
 
 
+#: A mesh fence 4.4 m off, 1.2 m tall: thin beside the road, as the wire rows within it.
+FENCE = (4.39, 4.43, 0.05, 1.2)
+
+
+def long_object_with_a_stretch_called_guardrail(
+    stretch: range, box=FENCE, length: int = 40
+) -> tuple[np.ndarray, SegmentExtents]:
+    """One component of ``length`` slices of ``box``, called other but in ``stretch``."""
+    labels = np.isin(np.arange(length), list(stretch))
+    return labels, extents(*run(range(length), box))
+
+
+def test_a_few_slices_of_a_long_object_called_other_are_other() -> None:
+    """Slices 18-21 of a 40-slice fence called guardrail: 4 of the 41 slices around them (at
+    most 0.25); a run of four, which the paper's rules keep."""
+    labels, segments = long_object_with_a_stretch_called_guardrail(range(18, 22))
+    assert not correct_labels(labels, segments).any()
+    off = CorrectionParams(object_window_slices=0)
+    np.testing.assert_array_equal(correct_labels(labels, segments, off), labels)
+    # 11 of the 41 slices (0.27) are too many, and near a short fence's end 14 other slices
+    # around (15 are asked for) too few; 15 are enough.
+    for stretch, length in ((range(15, 26), 40), (range(14, 18), 18)):
+        labels, segments = long_object_with_a_stretch_called_guardrail(stretch, length=length)
+        np.testing.assert_array_equal(correct_labels(labels, segments), labels)
+    labels, segments = long_object_with_a_stretch_called_guardrail(range(14, 18), length=19)
+    assert not correct_labels(labels, segments).any()
+
+
+def test_a_rail_joined_to_a_long_curb_stays_guardrail() -> None:
+    """A 10-slice rail (slices 15-24) of the same component as a 40-slice curb below it: the
+    curb does not reach the rail's mid-height, so the rail is not a piece of it. A hedge as
+    long, reaching above the rail, takes it (10 of 50 segments around are guardrail)."""
+    for below, kept in ((CURB, True), (HEDGE, False)):
+        segments = extents(*run(range(40), below), *run(range(15, 25)))
+        labels = np.r_[np.zeros(40, bool), np.ones(10, bool)]
+        corrected = correct_labels(labels, segments)
+        np.testing.assert_array_equal(corrected[40:], kept)
+
+
+def wire_inside_a_fence(
+    host_probability: float = 0.01, host=FENCE, host_slices: int = 30
+) -> tuple[np.ndarray, SegmentExtents, np.ndarray]:
+    """A fence (component 0, ``host_slices``, called other with ``host_probability``) and a
+    wire row come apart from it (component 1, slices 10-13, called guardrail, P 0.99)."""
+    segments = extents(
+        *run(range(host_slices), host),
+        *run(range(10, 14), WIRE),
+        component=[0] * host_slices + [1] * 4,
+    )
+    labels = np.r_[np.zeros(host_slices, bool), np.ones(4, bool)]
+    probability = np.r_[np.full(host_slices, host_probability), np.full(4, 0.99)]
+    return labels, segments, probability
+
+
+def test_a_short_piece_within_a_fences_outline_is_other() -> None:
+    labels, segments, probability = wire_inside_a_fence()
+    assert not correct_labels(labels, segments, probability=probability).any()
+    # Without the probabilities the rule does not apply, nor when it is off.
+    np.testing.assert_array_equal(correct_labels(labels, segments), labels)
+    off = CorrectionParams(inside_max_slices=0)
+    np.testing.assert_array_equal(correct_labels(labels, segments, off, probability), labels)
+    kept = {
+        "the fence not sure": wire_inside_a_fence(host_probability=0.2),
+        "a wide host: a hedge": wire_inside_a_fence(host=(4.2, 4.8, 0.0, 1.6)),
+        "a short host": wire_inside_a_fence(host_slices=9),
+        "outside the outline": wire_inside_a_fence(host=(4.39, 4.43, 0.7, 1.2)),
+    }
+    for name, (labels, segments, probability) in kept.items():
+        corrected = correct_labels(labels, segments, probability=probability)
+        np.testing.assert_array_equal(corrected, labels, err_msg=name)
+    # A piece of a component longer than inside_max_slices is not a piece.
+    labels, segments, probability = wire_inside_a_fence()
+    three = CorrectionParams(inside_max_slices=3)
+    np.testing.assert_array_equal(correct_labels(labels, segments, three, probability), labels)
+
+
+@pytest.mark.parametrize("seed", [72, 73])
+def test_long_objects_beyond_the_reach_do_not_change_a_corrected_label(seed: int) -> None:
+    """Long components called other but for a few slices, short pieces within them, labels
+    and probabilities drawn again beyond the reach."""
+    params = CorrectionParams()
+    reach = correction_reach_slices(params)
+    rng = np.random.default_rng(seed)
+    n = 1500
+    slices = rng.integers(0, 160, n)
+    kind = rng.integers(0, 3, n)
+    component = kind * 1000 + slices // np.array([5, 40, 90])[kind]
+    ext = rail_band(rng, slices, component)
+    lateral = ext.lateral.copy()
+    lateral[:, 1] = np.minimum(lateral[:, 1], lateral[:, 0] + 0.15)  # thin hosts among them
+    ext = SegmentExtents(ext.slice_index, lateral, ext.height, ext.component, ext.n_points)
+    core = (slices >= 70) & (slices < 90)
+    near = (slices >= 70 - reach) & (slices < 90 + reach)
+
+    def draw(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        m = len(rows)
+        return rng.random(m) < 0.15, rng.random(m) * 0.3
+
+    removed = 0
+    for _ in range(20):
+        labels, probability = draw(np.arange(n))
+        corrected = correct_labels(labels, ext, params, probability)
+        beyond_labels, beyond_probability = draw(np.flatnonzero(~near))
+        labels[~near], probability[~near] = beyond_labels, beyond_probability
+        np.testing.assert_array_equal(
+            correct_labels(labels, ext, params, probability)[core], corrected[core]
+        )
+        off = CorrectionParams(object_window_slices=0, inside_max_slices=0)
+        removed += int((corrected != correct_labels(labels, ext, off, probability))[core].sum())
+    assert removed > 20  # the fixture exercises the rules
+
+
 #: A hedge 0.3 m behind BEAM, as tall as a person.
 HEDGE = (2.4, 2.9, 0.0, 1.6)
 

@@ -10,7 +10,9 @@ the same slice and on the same side of the path, becomes other. A hedge, a fence
 rack just behind a rail is cut into slices like the rail, and its crop shows the rail in front of
 it; the paper's streets had nothing behind their rails. And a short wireframe component whose
 crops say other is other, whatever its shape: a far mesh fence's wire rows come apart into short
-pieces that look like a pipe rail, and the crops of them show the mesh.
+pieces that look like a pipe rail, and the crops of them show the mesh. The wireframe's objects
+speak too: a few slices of a long object called other are part of it (a fence, a wall, a strip
+of grass), and so is a short piece lying within the outline of a thin one (a fence's wire row).
 """
 
 from __future__ import annotations
@@ -175,6 +177,66 @@ class CorrectionParams(StageParams):
         "guardrail segments of such rails)",
     )
 
+    object_window_slices: int = param(
+        20,
+        ge=0,
+        le=1000,
+        doc="a guardrail segment is other when its wireframe component (one object, §3.2), "
+        "within this many slices on either side of it (10 m in 0.5 m slices), holds at least "
+        "object_min_other segments called other and object_max_share or less of its segments "
+        "there are called guardrail: a few slices of a long fence, hedge or strip of grass "
+        "that the classifier took for a rail are part of that object, not a rail of their "
+        "own. At most the tile margin in slices (20 with the default 10 m), so that a tile "
+        "sees the window whole; 0 turns the rule off",
+    )
+    object_min_other: int = param(
+        15,
+        ge=1,
+        le=10000,
+        doc="the component holds at least this many segments called other within "
+        "object_window_slices of the segment (7.5 m of slices in all with the default)",
+    )
+    object_max_share: float = param(
+        0.25,
+        ge=0,
+        lt=0.5,
+        doc="and at most this share of its segments there are called guardrail",
+    )
+
+    inside_max_slices: int = param(
+        6,
+        ge=0,
+        le=1000,
+        doc="a guardrail segment of a wireframe component spanning at most this many slices "
+        "(3 m in 0.5 m slices) that lies within the lateral and height extent (widened by "
+        "fill_margin_m) of a segment in its slice whose component spans at least "
+        "inside_host_min_slices and whose P(guardrail) is under inside_host_max_probability "
+        "is other: the wire rows of a mesh fence come apart from its frame in a far scan, and "
+        "lie within the fence's outline. 0 turns the rule off",
+    )
+    inside_host_min_slices: int = param(
+        10,
+        ge=1,
+        le=1000,
+        doc="the segment it lies within is of a component spanning at least this many slices "
+        "(5 m in 0.5 m slices); at most the tile margin in slices, so a tile sees that much",
+    )
+    inside_host_max_width_m: float = param(
+        0.2,
+        unit="m",
+        ge=0,
+        finite=False,
+        doc="and that segment spans at most this much across the path: a fence or a wall, "
+        "thin, whose outline holds nothing but itself, not a hedge or a bush, whose outline "
+        "may hold a rail pressed into it; inf: any width",
+    )
+    inside_host_max_probability: float = param(
+        0.1,
+        ge=0,
+        le=1,
+        doc="and the classifier is this sure that segment is other (P(guardrail) under this)",
+    )
+
     def check_relations(self) -> None:
         if np.isfinite(self.behind_gap_m) and self.behind_gap_m >= self.behind_max_m:
             self.fail(
@@ -216,11 +278,14 @@ def correction_reach_slices(params: CorrectionParams = CorrectionParams()) -> in
     isolation test of the filled labels ``m`` more; whether a run in front spans ``f`` slices
     ``f`` more; the second isolation test ``m`` more: ``3 m + f + 3`` in all. The crop veto
     (:func:`_crops_say_other`) makes a raw label depend on the crops of its component within
-    ``crop_veto_max_slices`` slices (whether the component spans more is settled that far):
-    that many more.
+    ``crop_veto_max_slices`` slices (whether the component spans more is settled that far),
+    and the rule of a long object's few slices (:func:`_pieces_of_other_objects`) on the raw
+    labels of its component within ``object_window_slices``: the larger of the two more. A
+    short piece within a fence's outline (:func:`_inside_other_objects`) depends on the labels
+    of its own slice alone.
     """
     rules = 3 * params.min_run_slices + params.behind_front_min_slices + 3
-    return rules + params.crop_veto_max_slices
+    return rules + max(params.crop_veto_max_slices, params.object_window_slices)
 
 
 def neighbour_pairs(
@@ -390,6 +455,107 @@ def _behind_a_run(
     return out
 
 
+def _pieces_of_other_objects(
+    labels: np.ndarray, extents: SegmentExtents, params: CorrectionParams
+) -> np.ndarray:
+    """(S,) bool: guardrail segments whose wireframe component, within
+    ``object_window_slices`` slices on either side, holds at least ``object_min_other`` other
+    segments reaching across the segment's mid-height and at most ``object_max_share``
+    guardrail ones (the segment itself counted) among those and its guardrail segments there.
+
+    The other segments must reach across the segment's height: a rail joined through its posts
+    to a long curb or strip of verge is one component with them, but it stands above them."""
+    n = len(labels)
+    window = params.object_window_slices
+    if window == 0 or n == 0:
+        return np.zeros(n, bool)
+    _, component = np.unique(np.asarray(extents.component), return_inverse=True)
+    slice_index = np.asarray(extents.slice_index, np.int64)
+    height = np.asarray(extents.height, np.float64)
+    # Pairs (a, b) of segments of one component within the window of a: the segments of each
+    # component in order of their slices, a's window a run of them.
+    stride = int(slice_index.max() - slice_index.min()) + 2 * window + 2
+    key = component.astype(np.int64) * stride + (slice_index - slice_index.min() + window)
+    order = np.argsort(key, kind="stable")
+    sorted_key = key[order]
+    candidates = np.flatnonzero(labels)
+    lo = np.searchsorted(sorted_key, key[candidates] - window, side="left")
+    hi = np.searchsorted(sorted_key, key[candidates] + window, side="right")
+    count = hi - lo
+    a = np.repeat(candidates, count)
+    b = order[np.arange(count.sum()) - np.repeat(np.cumsum(count) - count - lo, count)]
+    middle = height[a].mean(axis=1)
+    across = ~labels[b] & (middle <= height[b, 1])
+    n_other = np.bincount(a, weights=across, minlength=n)
+    n_guardrail = np.bincount(a, weights=labels[b], minlength=n)
+    return (
+        labels
+        & (n_other >= params.object_min_other)
+        & (n_guardrail <= params.object_max_share * (n_guardrail + n_other))
+    )
+
+
+def _component_spans(extents: SegmentExtents) -> np.ndarray:
+    """(S,) int64: how many slices each segment's wireframe component spans (first to last)."""
+    _, component = np.unique(np.asarray(extents.component), return_inverse=True)
+    slice_index = np.asarray(extents.slice_index, np.int64)
+    k = int(component.max()) + 1
+    first = np.full(k, np.iinfo(np.int64).max)
+    last = np.full(k, np.iinfo(np.int64).min)
+    np.minimum.at(first, component, slice_index)
+    np.maximum.at(last, component, slice_index)
+    return (last - first + 1)[component]
+
+
+def _inside_other_objects(
+    labels: np.ndarray,
+    extents: SegmentExtents,
+    probability: np.ndarray,
+    params: CorrectionParams,
+) -> np.ndarray:
+    """(S,) bool: guardrail segments of short components (``inside_max_slices``) lying within
+    the extent, widened by ``fill_margin_m``, of a segment in their slice of another component
+    spanning ``inside_host_min_slices`` or more, P(guardrail) under
+    ``inside_host_max_probability``."""
+    n = len(labels)
+    if params.inside_max_slices == 0 or n == 0:
+        return np.zeros(n, bool)
+    span = _component_spans(extents)
+    piece = labels & (span <= params.inside_max_slices)
+    width = np.diff(np.asarray(extents.lateral, np.float64), axis=1)[:, 0]
+    host = (
+        ~labels
+        & (span >= params.inside_host_min_slices)
+        & (width <= params.inside_host_max_width_m)
+        & (probability < params.inside_host_max_probability)
+    )
+    if not piece.any() or not host.any():
+        return np.zeros(n, bool)
+    slice_index = np.asarray(extents.slice_index, np.int64)
+    component = np.asarray(extents.component)
+    lateral = np.asarray(extents.lateral, np.float64)
+    height = np.asarray(extents.height, np.float64)
+    hosts = np.flatnonzero(host)
+    hosts = hosts[np.argsort(slice_index[hosts], kind="stable")]
+    pieces = np.flatnonzero(piece)
+    lo = np.searchsorted(slice_index[hosts], slice_index[pieces], side="left")
+    hi = np.searchsorted(slice_index[hosts], slice_index[pieces], side="right")
+    count = hi - lo
+    a = np.repeat(pieces, count)
+    b = hosts[np.arange(count.sum()) - np.repeat(np.cumsum(count) - count - lo, count)]
+    margin = params.fill_margin_m
+    within = (
+        (component[a] != component[b])
+        & (lateral[a, 0] >= lateral[b, 0] - margin)
+        & (lateral[a, 1] <= lateral[b, 1] + margin)
+        & (height[a, 0] >= height[b, 0] - margin)
+        & (height[a, 1] <= height[b, 1] + margin)
+    )
+    out = np.zeros(n, bool)
+    out[a[within]] = True
+    return out
+
+
 def _crops_say_other(
     extents: SegmentExtents, crop_probability: np.ndarray, params: CorrectionParams
 ) -> np.ndarray:
@@ -400,21 +566,14 @@ def _crops_say_other(
     if params.crop_veto_max_slices == 0 or n == 0:
         return np.zeros(n, bool)
     _, component = np.unique(np.asarray(extents.component), return_inverse=True)
-    slice_index = np.asarray(extents.slice_index, np.int64)
-    k = int(component.max()) + 1
-    first = np.full(k, np.iinfo(np.int64).max)
-    last = np.full(k, np.iinfo(np.int64).min)
-    np.minimum.at(first, component, slice_index)
-    np.maximum.at(last, component, slice_index)
     has_crop = np.isfinite(crop_probability)
-    crops = np.bincount(component, weights=has_crop, minlength=k)
-    other = np.bincount(component, weights=has_crop & (crop_probability < 0.5), minlength=k)
-    say_other = (
-        (last - first + 1 <= params.crop_veto_max_slices)
+    crops = np.bincount(component, weights=has_crop)[component]
+    other = np.bincount(component, weights=has_crop & (crop_probability < 0.5))[component]
+    return (
+        (_component_spans(extents) <= params.crop_veto_max_slices)
         & (crops >= params.crop_veto_min_crops)
         & (other >= params.crop_veto_share * crops)
     )
-    return say_other[component]
 
 
 def correct_labels(
@@ -477,6 +636,13 @@ def correct_labels(
         say_other = _crops_say_other(extents, np.asarray(crop_probability, np.float64), params)
         labels &= ~say_other
         fillable &= ~say_other
+    # Beyond the paper: a few slices of a long object called other are part of that object,
+    # and so is a short piece lying within the outline of one.
+    piece = _pieces_of_other_objects(labels, extents, params)
+    if probability is not None:
+        piece |= _inside_other_objects(labels, extents, np.asarray(probability, np.float64), params)
+    labels &= ~piece
+    fillable &= ~piece
     slice_index = np.asarray(extents.slice_index, np.int64)
     pairs = neighbour_pairs(extents, params)
 
