@@ -407,6 +407,25 @@ def test_what_is_left_of_a_run_behind_a_rail_is_isolated() -> None:
     np.testing.assert_array_equal(hedge, [False] * 10 + [True] * 2)
 
 
+def test_what_stands_behind_a_rail_does_not_widen_a_hole_for_the_fill() -> None:
+    """A rail (component 0) in slices 0-4 and 6-9; in slice 5 the rail with a hedge grown
+    into it, called other, 0.4 m deep; in slice 4 a piece of the hedge behind the rail
+    (component 1) called guardrail. With the piece counted the hole fitted the cross-section and
+    was filled; it stands behind the rail's run of 4 slices (1-4), so it does not count, unless
+    slice 1 is other and the run in front too short: a raw label 4 slices from the hole
+    (``behind_front_min_slices``) decides, within the reach."""
+    slot = (2.0, 2.45, 0.3, 1.0)
+    piece = (2.4, 2.6, 0.3, 1.0)
+    segments = [*run(range(5)), (5, slot), *run(range(6, 10)), (4, piece)]
+    ext = extents(*segments, component=[0] * 10 + [1])
+    raw = np.r_[np.ones(5, bool), False, np.ones(4, bool), True]
+    corrected = correct_labels(raw, ext)
+    assert not corrected[5] and not corrected[10]
+    raw[1] = False
+    assert correct_labels(raw, ext)[5]
+    assert correction_reach_slices() >= 4
+
+
 def test_a_lone_guardrail_segment_becomes_other() -> None:
     """Alone, and among other segments that touch it: a run of one slice is isolated."""
     np.testing.assert_array_equal(correct_labels(np.array([True]), extents((3, BEAM))), [False])
@@ -511,6 +530,41 @@ def test_what_is_not_a_post_stays_other(other: tuple[float, float, float, float]
     expected = np.ones(11, bool)
     expected[10] = False
     np.testing.assert_array_equal(corrected, expected)
+
+
+#: A low pipe rail (0.45-0.6 m up) and the stub of a post under it: the rest of the post is of
+#: the rail's segment, and the stub stops 8 cm under the rail.
+LOW_RAIL = (2.0, 2.03, 0.45, 0.6)
+STUB = (2.0, 2.1, 0.12, 0.37)
+
+
+def _low_rail_and(other: tuple[float, float, float, float]) -> np.ndarray:
+    """Corrected labels of ten slices of LOW_RAIL and ``other`` in slice 4, called other."""
+    segments = [*run(range(10), LOW_RAIL), (4, other)]
+    return correct_labels(np.r_[np.ones(10, bool), False], extents(*segments))
+
+
+def test_the_stub_of_a_post_under_a_low_rail_becomes_guardrail() -> None:
+    assert _low_rail_and(STUB).all()
+    segments = extents(*run(range(10), LOW_RAIL), (4, STUB))
+    labels = np.r_[np.ones(10, bool), False]
+    off = CorrectionParams(post_stub_gap_m=0)
+    np.testing.assert_array_equal(correct_labels(labels, segments, off), labels)
+
+
+@pytest.mark.parametrize(
+    "other",
+    [
+        (2.0, 2.1, 0.0, 0.2),  # a curb under the rail: not as high as a stub
+        (2.0, 2.1, 0.12, 0.3),  # 15 cm under the rail: not a stub
+        (2.0, 2.1, 0.35, 0.42),  # off the ground
+        (1.7, 1.82, 0.0, 0.37),  # a bollard in front of the rail: too far beside it
+    ],
+)
+def test_what_is_not_a_stub_under_a_low_rail_stays_other(
+    other: tuple[float, float, float, float],
+) -> None:
+    np.testing.assert_array_equal(_low_rail_and(other), np.r_[np.ones(10, bool), False])
 
 
 def test_a_hole_of_two_slices_is_filled() -> None:

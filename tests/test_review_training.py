@@ -501,11 +501,12 @@ def test_a_run_from_before_the_crop_veto_keeps_short_components_whatever_their_c
     assert _run_correction(load_run(run_copy)) == CorrectionParams(crop_veto_max_slices=0)
 
 
-def test_a_run_from_before_the_rules_of_long_objects_keeps_their_pieces(
+def test_a_run_from_before_the_rules_of_long_objects_and_stubs_is_predicted_without_them(
     run_copy: Path,
 ) -> None:
     """A run whose correction parameters predate the rules of a long object's pieces (a few
-    slices called guardrail, a short piece within its outline) is re-predicted without them."""
+    slices called guardrail, a short piece within its outline) and of posts' stubs is
+    re-predicted without them."""
     from guardrail_core.review.training import _run_correction
 
     info_path = run_copy / "run.json"
@@ -518,11 +519,15 @@ def test_a_run_from_before_the_rules_of_long_objects_keeps_their_pieces(
         "inside_host_min_slices",
         "inside_host_max_width_m",
         "inside_host_max_probability",
+        "post_stub_gap_m",
+        "post_stub_min_top_m",
     ):
         info["params"]["correction"].pop(name)
     info_path.write_text(json.dumps(info))
     params = _run_correction(load_run(run_copy))
-    assert params == CorrectionParams(object_window_slices=0, inside_max_slices=0)
+    assert params == CorrectionParams(
+        object_window_slices=0, inside_max_slices=0, post_stub_gap_m=0.0
+    )
 
 
 def test_write_predictions_replaces_the_runs_predictions(

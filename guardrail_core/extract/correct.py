@@ -75,6 +75,24 @@ class CorrectionParams(StageParams):
         doc="share of the way from the bottom of a post's guardrail neighbours to their top "
         "that the post's top reaches at least; a curb beside or under the rails does not",
     )
+    post_stub_gap_m: float = param(
+        0.12,
+        unit="m",
+        ge=0,
+        le=10,
+        doc="an other segment inside a run that stands on the ground (post_foot_m), within "
+        "post_width_m of its guardrail neighbours beside the road, and whose top comes within "
+        "this of their bottom is the stub of a post under a low rail and becomes guardrail: "
+        "the rest of the post is of the rail's segment, and the stub stops 5-10 cm under the "
+        "rail, short of post_min_reach. 0 turns the rule off",
+    )
+    post_stub_min_top_m: float = param(
+        0.25,
+        unit="m",
+        ge=0,
+        le=10,
+        doc="a post's stub reaches at least this high above the road: a curb does not",
+    )
     max_hole_slices: int = param(
         2,
         choices=(1, 2),
@@ -273,10 +291,11 @@ def correction_reach_slices(params: CorrectionParams = CorrectionParams()) -> in
     slices of its own (so a processing tile asks the CNN only for crops that close to the
     slices it owns). Counted step by step through :func:`correct_labels`, ``m`` being
     ``min_run_slices`` and ``f`` ``behind_front_min_slices``: the one-slice fill looks one slice
-    away; whether a run spans ``m`` slices is settled within ``m`` slices (a run that leaves them
+    away, at neighbours standing behind no run in front, which is settled within ``f`` slices;
+    whether a run spans ``m`` slices is settled within ``m`` slices (a run that leaves them
     already spans more); the two-slice fill looks a further run test and two slices beyond; the
     isolation test of the filled labels ``m`` more; whether a run in front spans ``f`` slices
-    ``f`` more; the second isolation test ``m`` more: ``3 m + f + 3`` in all. The crop veto
+    ``f`` more; the second isolation test ``m`` more: ``3 m + 2 f + 3`` in all. The crop veto
     (:func:`_crops_say_other`) makes a raw label depend on the crops of its component within
     ``crop_veto_max_slices`` slices (whether the component spans more is settled that far),
     and the rule of a long object's few slices (:func:`_pieces_of_other_objects`) on the raw
@@ -284,7 +303,7 @@ def correction_reach_slices(params: CorrectionParams = CorrectionParams()) -> in
     short piece within a fence's outline (:func:`_inside_other_objects`) depends on the labels
     of its own slice alone.
     """
-    rules = 3 * params.min_run_slices + params.behind_front_min_slices + 3
+    rules = 3 * params.min_run_slices + 2 * params.behind_front_min_slices + 3
     return rules + max(params.crop_veto_max_slices, params.object_window_slices)
 
 
@@ -399,7 +418,17 @@ def _fits_between(
         & (height[:, 1] >= (1 - reach) * low[:, 1] + reach * high[:, 1])
         & below_top
     )
-    out[near] = within | is_post
+    # The stub of a post under a low rail (the rest of the post is of the rail's segment).
+    is_stub = (
+        (height[:, 0] <= params.post_foot_m)
+        & (lateral[:, 0] >= low[:, 0] - post)
+        & (lateral[:, 1] <= high[:, 0] + post)
+        & (height[:, 1] >= low[:, 1] - params.post_stub_gap_m)
+        & (height[:, 1] >= params.post_stub_min_top_m)
+        & below_top
+        & (params.post_stub_gap_m > 0)
+    )
+    out[near] = within | is_post | is_stub
     return out
 
 
@@ -650,7 +679,10 @@ def correct_labels(
     # slices before and after it and lies within their cross-section (or is a post).
     lateral = np.asarray(extents.lateral, np.float64)
     height = np.asarray(extents.height, np.float64)
-    before, after, low, high = _guardrail_sides(labels, pairs, slice_index, lateral, height)
+    # What stands behind a run of another component does not widen the cross-section a
+    # hole is filled within (it becomes other below).
+    standing = labels & ~_behind_a_run(labels, pairs, extents, params)
+    before, after, low, high = _guardrail_sides(standing, pairs, slice_index, lateral, height)
     fits = _fits_between(lateral, height, low, high, params) & fillable
     fill = ~labels & before & after & fits
     if params.max_hole_slices == 2:

@@ -700,8 +700,8 @@ def _run_correction(run: Run) -> CorrectionParams:
     """The run's own correction rules; a run from before the fill floor filled by position
     alone, one from before the rule of what stands behind a rail kept it, one from before
     wide segments touching a rail's back kept them, one from before the crop veto kept
-    short components whatever their crops said, and one from before the rules of long objects
-    kept their pieces called guardrail."""
+    short components whatever their crops said, one from before the rules of long objects
+    kept their pieces called guardrail, and one from before posts' stubs left them other."""
     before = {
         "fill_min_probability": 0.0,
         "behind_gap_m": float("inf"),
@@ -709,6 +709,7 @@ def _run_correction(run: Run) -> CorrectionParams:
         "crop_veto_max_slices": 0,
         "object_window_slices": 0,
         "inside_max_slices": 0,
+        "post_stub_gap_m": 0.0,
     }
     stored = {**before, **(run.info.params.get("correction") or {})}
     known = CorrectionParams.__dataclass_fields__
