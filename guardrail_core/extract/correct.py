@@ -682,7 +682,8 @@ def correct_labels(
     # What stands behind a run of another component does not widen the cross-section a
     # hole is filled within (it becomes other below).
     standing = labels & ~_behind_a_run(labels, pairs, extents, params)
-    before, after, low, high = _guardrail_sides(standing, pairs, slice_index, lateral, height)
+    before, after, _, _ = _guardrail_sides(labels, pairs, slice_index, lateral, height)
+    _, _, low, high = _guardrail_sides(standing, pairs, slice_index, lateral, height)
     fits = _fits_between(lateral, height, low, high, params) & fillable
     fill = ~labels & before & after & fits
     if params.max_hole_slices == 2:
