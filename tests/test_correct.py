@@ -344,10 +344,25 @@ def test_a_hedge_touching_the_back_of_a_rail_becomes_other() -> None:
 
 
 def test_a_rails_own_parts_behind_it_stay_guardrail() -> None:
-    """A post behind a beam, or the back rail of a double-sided barrier, is of its component."""
+    """A post with its blockout behind a beam (touching it), or the back rail of a
+    double-sided barrier (0.3 m behind, 8 cm deep), is of the beam's component and stays."""
+    for behind in ((2.1, 2.3, 0.0, 1.0), (2.4, 2.48, 0.3, 1.0)):
+        segments = run(range(10)) + run(range(10), behind)
+        assert correct_labels(np.ones(20, bool), extents(*segments)).all()  # all component 0
+
+
+def test_a_hedge_grown_into_a_rails_back_becomes_other() -> None:
+    """A hedge of the rail's own component (grown into its back), cut from the rail's slices
+    as segments of their own, 0.3 m behind and 0.5 m deep (``behind_own_wide_m``)."""
     segments = run(range(10)) + run(range(10), HEDGE)
     labels = correct_labels(np.ones(20, bool), extents(*segments))  # all component 0
-    assert labels.all()
+    np.testing.assert_array_equal(labels, np.r_[np.ones(10, bool), np.zeros(10, bool)])
+    off = CorrectionParams(behind_own_wide_m=np.inf)
+    assert correct_labels(np.ones(20, bool), extents(*segments), off).all()
+    # Narrower than 0.3 m, or within behind_gap_m of the rail's back: kept.
+    for behind in ((2.4, 2.65, 0.0, 1.6), (2.15, 2.9, 0.0, 1.6)):
+        segments = run(range(10)) + run(range(10), behind)
+        assert correct_labels(np.ones(20, bool), extents(*segments)).all()
 
 
 @pytest.mark.parametrize(
@@ -768,6 +783,48 @@ def test_what_stands_behind_a_rail_equals_a_brute_force_search(seed: int) -> Non
     assert 5 < expected.sum() < labels.sum()  # the fixture has both
     narrow_only = CorrectionParams(behind_wide_m=np.inf)
     assert (_behind_a_run(labels, pairs, ext, narrow_only) != got).any()  # and wide ones
+
+
+@pytest.mark.parametrize("seed", [57, 58])
+def test_what_stands_behind_its_own_rail_equals_a_brute_force_search(seed: int) -> None:
+    from guardrail_core.extract.correct import _behind_its_own_rail, _run_span
+
+    rng = np.random.default_rng(seed)
+    n = 400
+    slices = rng.integers(0, 12, n)
+    lo = rng.uniform(-3.0, 3.0, n)
+    ext = SegmentExtents(
+        slices,
+        np.column_stack([lo, lo + rng.uniform(0.02, 0.8, n)]),  # some behind_own_wide_m wide
+        np.column_stack([np.zeros(n), rng.uniform(0.2, 1.2, n)]),
+        rng.integers(0, 5, n),
+        rng.integers(1, 10, n),
+    )
+    labels = rng.random(n) < 0.6
+    params = CorrectionParams()
+    pairs = neighbour_pairs(ext, params)
+    front = labels & (ext.n_points >= params.behind_front_min_points)
+    front &= _run_span(labels, pairs, ext.slice_index) >= params.behind_front_min_slices
+    expected = np.zeros(n, bool)
+    for i in np.flatnonzero(labels):
+        if ext.lateral[i][1] - ext.lateral[i][0] < params.behind_own_wide_m:
+            continue
+        for sign in (1, -1):
+            near_i = min(sign * ext.lateral[i])
+            if near_i <= 0:
+                continue
+            for j in np.flatnonzero(front):
+                same = ext.slice_index[j] == ext.slice_index[i]
+                same &= ext.component[j] == ext.component[i]
+                near_j, far_j = sorted(sign * ext.lateral[j])
+                if j == i or not same or near_j <= 0:
+                    continue
+                behind = near_i - far_j
+                if params.behind_gap_m < behind <= params.behind_max_m:
+                    expected[i] = True
+    got = _behind_its_own_rail(labels, pairs, ext, params)
+    np.testing.assert_array_equal(got, expected)
+    assert 3 < expected.sum() < labels.sum()  # the fixture has both
 
 
 def test_labels_and_extents_of_different_lengths_is_a_named_error() -> None:

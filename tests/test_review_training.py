@@ -505,8 +505,8 @@ def test_a_run_from_before_the_rules_of_long_objects_and_stubs_is_predicted_with
     run_copy: Path,
 ) -> None:
     """A run whose correction parameters predate the rules of a long object's pieces (a few
-    slices called guardrail, a short piece within its outline) and of posts' stubs is
-    re-predicted without them."""
+    slices called guardrail, a short piece within its outline), of posts' stubs and of a hedge
+    grown into a rail's back is re-predicted without them."""
     from guardrail_core.review.training import _run_correction
 
     info_path = run_copy / "run.json"
@@ -521,12 +521,16 @@ def test_a_run_from_before_the_rules_of_long_objects_and_stubs_is_predicted_with
         "inside_host_max_probability",
         "post_stub_gap_m",
         "post_stub_min_top_m",
+        "behind_own_wide_m",
     ):
         info["params"]["correction"].pop(name)
     info_path.write_text(json.dumps(info))
     params = _run_correction(load_run(run_copy))
     assert params == CorrectionParams(
-        object_window_slices=0, inside_max_slices=0, post_stub_gap_m=0.0
+        object_window_slices=0,
+        inside_max_slices=0,
+        post_stub_gap_m=0.0,
+        behind_own_wide_m=float("inf"),
     )
 
 

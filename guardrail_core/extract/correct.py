@@ -13,6 +13,8 @@ crops say other is other, whatever its shape: a far mesh fence's wire rows come 
 pieces that look like a pipe rail, and the crops of them show the mesh. The wireframe's objects
 speak too: a few slices of a long object called other are part of it (a fence, a wall, a strip
 of grass), and so is a short piece lying within the outline of a thin one (a fence's wire row).
+A hedge grown into a rail's back is of the rail's component; cut from the rail's slices, what
+stands behind the rail and is wider than any of its own parts is other too.
 """
 
 from __future__ import annotations
@@ -148,6 +150,19 @@ class CorrectionParams(StageParams):
         "spans front_behind_min_width_m, 0.1 m, or more). A rail's posts and back rail are of "
         "its own component; inf asks every segment for behind_gap_m",
     )
+    behind_own_wide_m: float = param(
+        0.3,
+        unit="m",
+        gt=0,
+        finite=False,
+        doc="a guardrail segment spanning at least this much across the path that stands more "
+        "than behind_gap_m and at most behind_max_m behind a front of its own component in its "
+        "slice becomes other: a hedge grown into a rail's back is one wireframe component with "
+        "it, and the cut of a slice behind the rail's front parts its face from the rail, as "
+        "its own segment. Wider than a rail, a post with its blockouts or the back rail of a "
+        "double-sided barrier (each at most 0.2 m across, the last as its own segment only "
+        "between posts); inf turns the rule off",
+    )
     behind_front_min_slices: int = param(
         4,
         ge=1,
@@ -201,11 +216,11 @@ class CorrectionParams(StageParams):
         le=1000,
         doc="a guardrail segment is other when its wireframe component (one object, §3.2), "
         "within this many slices on either side of it (10 m in 0.5 m slices), holds at least "
-        "object_min_other segments called other and object_max_share or less of its segments "
-        "there are called guardrail: a few slices of a long fence, hedge or strip of grass "
-        "that the classifier took for a rail are part of that object, not a rail of their "
-        "own. At most the tile margin in slices (20 with the default 10 m), so that a tile "
-        "sees the window whole; 0 turns the rule off",
+        "object_min_other segments called other reaching up to its mid-height and "
+        "object_max_share or less of its segments there are called guardrail: a few slices of "
+        "a long fence, hedge or strip of grass that the classifier took for a rail are part of "
+        "that object, not a rail of their own. At most the tile margin in slices (20 with the "
+        "default 10 m), so that a tile sees the window whole; 0 turns the rule off",
     )
     object_min_other: int = param(
         15,
@@ -484,6 +499,48 @@ def _behind_a_run(
     return out
 
 
+def _behind_its_own_rail(
+    labels: np.ndarray,
+    pairs: np.ndarray,
+    extents: SegmentExtents,
+    params: CorrectionParams,
+) -> np.ndarray:
+    """(S,) bool: guardrail segments spanning ``behind_own_wide_m`` or more across that stand
+    more than ``behind_gap_m`` and at most ``behind_max_m`` behind a front (as for
+    :func:`_behind_a_run`) of their own component in their slice."""
+    n = len(labels)
+    out = np.zeros(n, bool)
+    if not (np.isfinite(params.behind_gap_m) and np.isfinite(params.behind_own_wide_m)):
+        return out
+    slice_index = np.asarray(extents.slice_index, np.int64)
+    lateral = np.asarray(extents.lateral, np.float64)
+    _, component = np.unique(np.asarray(extents.component), return_inverse=True)
+    side = np.where(lateral[:, 0] > 0, 1, np.where(lateral[:, 1] < 0, -1, 0))
+    nearest = np.where(side > 0, lateral[:, 0], -lateral[:, 1])  # metres from the path
+    farthest = np.where(side > 0, lateral[:, 1], -lateral[:, 0])
+    front = labels & (side != 0) & (np.asarray(extents.n_points) >= params.behind_front_min_points)
+    front &= _run_span(labels, pairs, slice_index) >= params.behind_front_min_slices
+    wide = labels & (side != 0) & (farthest - nearest >= params.behind_own_wide_m)
+    if not wide.any() or not front.any():
+        return out
+    # Pairs (a, b): a wide segment and a front of the same (slice, side, component).
+    members = np.flatnonzero(wide | front)
+    key = (slice_index[members] - slice_index.min()) * 2 + (side[members] > 0)
+    key = key * (int(component.max()) + 1) + component[members]
+    order = np.argsort(key, kind="stable")
+    members, key = members[order], key[order]
+    candidates = np.flatnonzero(wide[members])
+    lo = np.searchsorted(key, key[candidates], side="left")
+    hi = np.searchsorted(key, key[candidates], side="right")
+    count = hi - lo
+    a = members[np.repeat(candidates, count)]
+    b = members[np.arange(count.sum()) - np.repeat(np.cumsum(count) - count - lo, count)]
+    behind = nearest[a] - farthest[b]
+    hit = front[b] & (behind > params.behind_gap_m) & (behind <= params.behind_max_m)
+    out[a[hit]] = True
+    return out
+
+
 def _pieces_of_other_objects(
     labels: np.ndarray, extents: SegmentExtents, params: CorrectionParams
 ) -> np.ndarray:
@@ -708,6 +765,7 @@ def correct_labels(
     # What stands behind a run of another object is not guardrail; what it leaves of a run too
     # short is isolated.
     behind = _behind_a_run(labels, pairs, extents, params)
+    behind |= _behind_its_own_rail(labels, pairs, extents, params)
     if behind.any():
         labels[behind] = False
         span = _run_span(labels, pairs, slice_index)

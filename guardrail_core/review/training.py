@@ -701,7 +701,8 @@ def _run_correction(run: Run) -> CorrectionParams:
     alone, one from before the rule of what stands behind a rail kept it, one from before
     wide segments touching a rail's back kept them, one from before the crop veto kept
     short components whatever their crops said, one from before the rules of long objects
-    kept their pieces called guardrail, and one from before posts' stubs left them other."""
+    kept their pieces called guardrail, one from before posts' stubs left them other, and one
+    from before the rule of a hedge grown into a rail's back kept it."""
     before = {
         "fill_min_probability": 0.0,
         "behind_gap_m": float("inf"),
@@ -710,6 +711,7 @@ def _run_correction(run: Run) -> CorrectionParams:
         "object_window_slices": 0,
         "inside_max_slices": 0,
         "post_stub_gap_m": 0.0,
+        "behind_own_wide_m": float("inf"),
     }
     stored = {**before, **(run.info.params.get("correction") or {})}
     known = CorrectionParams.__dataclass_fields__
