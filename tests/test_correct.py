@@ -735,17 +735,20 @@ def test_correction_does_not_depend_on_segment_order(seed: int) -> None:
     assert (corrected != labels).any()  # the fixture exercises the rules
 
 
-@pytest.mark.parametrize("seed", [54, 55, 56])
-def test_what_stands_behind_a_rail_equals_a_brute_force_search(seed: int) -> None:
-    from guardrail_core.extract.correct import _behind_a_run, _run_span
+def behind_fixture(
+    seed: int, widest: float
+) -> tuple[np.ndarray, SegmentExtents, np.ndarray, np.ndarray]:
+    """400 random segments over 12 slices, some straddling the path, up to ``widest`` metres
+    across: labels (60 % guardrail), extents, neighbour pairs and the fronts (as the rules of
+    what stands behind a rail define them)."""
+    from guardrail_core.extract.correct import _run_span
 
     rng = np.random.default_rng(seed)
     n = 400
-    slices = rng.integers(0, 12, n)
-    lo = rng.uniform(-3.0, 3.0, n)  # some straddle the path: on neither side
+    lo = rng.uniform(-3.0, 3.0, n)
     ext = SegmentExtents(
-        slices,
-        np.column_stack([lo, lo + rng.uniform(0.02, 0.6, n)]),  # some behind_wide_m wide
+        rng.integers(0, 12, n),
+        np.column_stack([lo, lo + rng.uniform(0.02, widest, n)]),
         np.column_stack([np.zeros(n), rng.uniform(0.2, 1.2, n)]),
         rng.integers(0, 5, n),
         rng.integers(1, 10, n),
@@ -753,10 +756,18 @@ def test_what_stands_behind_a_rail_equals_a_brute_force_search(seed: int) -> Non
     labels = rng.random(n) < 0.6
     params = CorrectionParams()
     pairs = neighbour_pairs(ext, params)
-    span = _run_span(labels, pairs, ext.slice_index)
     front = labels & (ext.n_points >= params.behind_front_min_points)
-    front &= span >= params.behind_front_min_slices
-    expected = np.zeros(n, bool)
+    front &= _run_span(labels, pairs, ext.slice_index) >= params.behind_front_min_slices
+    return labels, ext, pairs, front
+
+
+@pytest.mark.parametrize("seed", [54, 55, 56])
+def test_what_stands_behind_a_rail_equals_a_brute_force_search(seed: int) -> None:
+    from guardrail_core.extract.correct import _behind_a_run
+
+    labels, ext, pairs, front = behind_fixture(seed, widest=0.6)  # some behind_wide_m wide
+    params = CorrectionParams()
+    expected = np.zeros(len(labels), bool)
     for i in np.flatnonzero(labels):
         for sign in (1, -1):  # the right side, then the left
             a = min(sign * ext.lateral[i])
@@ -787,25 +798,11 @@ def test_what_stands_behind_a_rail_equals_a_brute_force_search(seed: int) -> Non
 
 @pytest.mark.parametrize("seed", [57, 58])
 def test_what_stands_behind_its_own_rail_equals_a_brute_force_search(seed: int) -> None:
-    from guardrail_core.extract.correct import _behind_its_own_rail, _run_span
+    from guardrail_core.extract.correct import _behind_its_own_rail
 
-    rng = np.random.default_rng(seed)
-    n = 400
-    slices = rng.integers(0, 12, n)
-    lo = rng.uniform(-3.0, 3.0, n)
-    ext = SegmentExtents(
-        slices,
-        np.column_stack([lo, lo + rng.uniform(0.02, 0.8, n)]),  # some behind_own_wide_m wide
-        np.column_stack([np.zeros(n), rng.uniform(0.2, 1.2, n)]),
-        rng.integers(0, 5, n),
-        rng.integers(1, 10, n),
-    )
-    labels = rng.random(n) < 0.6
+    labels, ext, pairs, front = behind_fixture(seed, widest=0.8)  # some behind_own_wide_m wide
     params = CorrectionParams()
-    pairs = neighbour_pairs(ext, params)
-    front = labels & (ext.n_points >= params.behind_front_min_points)
-    front &= _run_span(labels, pairs, ext.slice_index) >= params.behind_front_min_slices
-    expected = np.zeros(n, bool)
+    expected = np.zeros(len(labels), bool)
     for i in np.flatnonzero(labels):
         if ext.lateral[i][1] - ext.lateral[i][0] < params.behind_own_wide_m:
             continue

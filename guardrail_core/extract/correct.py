@@ -447,6 +447,26 @@ def _fits_between(
     return out
 
 
+def _fronts(
+    labels: np.ndarray,
+    pairs: np.ndarray,
+    extents: SegmentExtents,
+    params: CorrectionParams,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Each segment's side of the path (S,) int (1 right, -1 left, 0 straddling it), its
+    nearest and farthest reach from the path (S,) metres, and whether it is a front (S,) bool:
+    a guardrail segment wholly on one side, of at least ``behind_front_min_points`` points, in a
+    run spanning at least ``behind_front_min_slices`` slices."""
+    lateral = np.asarray(extents.lateral, np.float64)
+    side = np.where(lateral[:, 0] > 0, 1, np.where(lateral[:, 1] < 0, -1, 0))
+    nearest = np.where(side > 0, lateral[:, 0], -lateral[:, 1])
+    farthest = np.where(side > 0, lateral[:, 1], -lateral[:, 0])
+    front = labels & (side != 0) & (np.asarray(extents.n_points) >= params.behind_front_min_points)
+    slice_index = np.asarray(extents.slice_index, np.int64)
+    front &= _run_span(labels, pairs, slice_index) >= params.behind_front_min_slices
+    return side, nearest, farthest, front
+
+
 def _behind_a_run(
     labels: np.ndarray,
     pairs: np.ndarray,
@@ -467,13 +487,8 @@ def _behind_a_run(
     if not np.isfinite(params.behind_gap_m):
         return out
     slice_index = np.asarray(extents.slice_index, np.int64)
-    lateral = np.asarray(extents.lateral, np.float64)
     component = np.asarray(extents.component, np.int64)
-    side = np.where(lateral[:, 0] > 0, 1, np.where(lateral[:, 1] < 0, -1, 0))  # 0: on the path
-    nearest = np.where(side > 0, lateral[:, 0], -lateral[:, 1])  # metres from the path
-    farthest = np.where(side > 0, lateral[:, 1], -lateral[:, 0])
-    front = labels & (side != 0) & (np.asarray(extents.n_points) >= params.behind_front_min_points)
-    front &= _run_span(labels, pairs, slice_index) >= params.behind_front_min_slices
+    side, nearest, farthest, front = _fronts(labels, pairs, extents, params)
     # The farthest reach of the fronts of each (slice, side, component); then each candidate
     # against those of its slice and side, of another component than its own.
     candidates = np.flatnonzero(labels & (side != 0))
@@ -513,13 +528,8 @@ def _behind_its_own_rail(
     if not (np.isfinite(params.behind_gap_m) and np.isfinite(params.behind_own_wide_m)):
         return out
     slice_index = np.asarray(extents.slice_index, np.int64)
-    lateral = np.asarray(extents.lateral, np.float64)
     _, component = np.unique(np.asarray(extents.component), return_inverse=True)
-    side = np.where(lateral[:, 0] > 0, 1, np.where(lateral[:, 1] < 0, -1, 0))
-    nearest = np.where(side > 0, lateral[:, 0], -lateral[:, 1])  # metres from the path
-    farthest = np.where(side > 0, lateral[:, 1], -lateral[:, 0])
-    front = labels & (side != 0) & (np.asarray(extents.n_points) >= params.behind_front_min_points)
-    front &= _run_span(labels, pairs, slice_index) >= params.behind_front_min_slices
+    side, nearest, farthest, front = _fronts(labels, pairs, extents, params)
     wide = labels & (side != 0) & (farthest - nearest >= params.behind_own_wide_m)
     if not wide.any() or not front.any():
         return out
