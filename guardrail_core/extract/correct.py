@@ -772,8 +772,8 @@ def correct_labels(
     span = _run_span(labels, pairs, slice_index)
     labels[labels & (span < params.min_run_slices)] = False
 
-    # What stands behind a run of another object is not guardrail; what it leaves of a run too
-    # short is isolated.
+    # What stands behind a run of another object is not guardrail, nor what stands behind its
+    # own rail wider than any of a rail's parts; what it leaves of a run too short is isolated.
     behind = _behind_a_run(labels, pairs, extents, params)
     behind |= _behind_its_own_rail(labels, pairs, extents, params)
     if behind.any():
