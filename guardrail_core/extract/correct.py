@@ -243,9 +243,10 @@ class CorrectionParams(StageParams):
         doc="a guardrail segment of a wireframe component spanning at most this many slices "
         "(3 m in 0.5 m slices) that lies within the lateral and height extent (widened by "
         "fill_margin_m) of a segment in its slice whose component spans at least "
-        "inside_host_min_slices and whose P(guardrail) is under inside_host_max_probability "
-        "is other: the wire rows of a mesh fence come apart from its frame in a far scan, and "
-        "lie within the fence's outline. 0 turns the rule off",
+        "inside_host_min_slices, which is at most inside_host_max_width_m thick and whose "
+        "P(guardrail) is under inside_host_max_probability is other: the wire rows of a mesh "
+        "fence come apart from its frame in a far scan, and lie within the fence's outline. 0 "
+        "turns the rule off",
     )
     inside_host_min_slices: int = param(
         10,
