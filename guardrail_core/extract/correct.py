@@ -448,6 +448,14 @@ def _fits_between(
     return out
 
 
+def _expand_ranges(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Every position of the ranges ``[lo[k], hi[k])`` (K,) int: (P,) the range each belongs to
+    and (P,) the position itself, ranges in order."""
+    count = hi - lo
+    owner = np.repeat(np.arange(len(lo)), count)
+    return owner, np.arange(count.sum()) - np.repeat(np.cumsum(count) - count - lo, count)
+
+
 def _fronts(
     labels: np.ndarray,
     pairs: np.ndarray,
@@ -504,9 +512,8 @@ def _behind_a_run(
     place = slice_index[candidates] * 2 + (side[candidates] > 0)
     lo = np.searchsorted(group_place, place, side="left")
     hi = np.searchsorted(group_place, place, side="right")
-    count = hi - lo
-    who = np.repeat(candidates, count)
-    group = np.repeat(lo - np.cumsum(count) + count, count) + np.arange(count.sum())
+    owner, group = _expand_ranges(lo, hi)
+    who = candidates[owner]
     behind = nearest[who] - group_far[group]
     wide = farthest - nearest >= params.behind_wide_m
     gap = (behind > params.behind_gap_m) | (wide[who] & (behind >= 0.0))
@@ -543,9 +550,8 @@ def _behind_its_own_rail(
     candidates = np.flatnonzero(wide[members])
     lo = np.searchsorted(key, key[candidates], side="left")
     hi = np.searchsorted(key, key[candidates], side="right")
-    count = hi - lo
-    a = members[np.repeat(candidates, count)]
-    b = members[np.arange(count.sum()) - np.repeat(np.cumsum(count) - count - lo, count)]
+    owner, position = _expand_ranges(lo, hi)
+    a, b = members[candidates[owner]], members[position]
     behind = nearest[a] - farthest[b]
     hit = front[b] & (behind > params.behind_gap_m) & (behind <= params.behind_max_m)
     out[a[hit]] = True
@@ -578,9 +584,8 @@ def _pieces_of_other_objects(
     candidates = np.flatnonzero(labels)
     lo = np.searchsorted(sorted_key, key[candidates] - window, side="left")
     hi = np.searchsorted(sorted_key, key[candidates] + window, side="right")
-    count = hi - lo
-    a = np.repeat(candidates, count)
-    b = order[np.arange(count.sum()) - np.repeat(np.cumsum(count) - count - lo, count)]
+    owner, position = _expand_ranges(lo, hi)
+    a, b = candidates[owner], order[position]
     middle = height[a].mean(axis=1)
     across = ~labels[b] & (middle <= height[b, 1])
     n_other = np.bincount(a, weights=across, minlength=n)
@@ -637,9 +642,8 @@ def _inside_other_objects(
     pieces = np.flatnonzero(piece)
     lo = np.searchsorted(slice_index[hosts], slice_index[pieces], side="left")
     hi = np.searchsorted(slice_index[hosts], slice_index[pieces], side="right")
-    count = hi - lo
-    a = np.repeat(pieces, count)
-    b = hosts[np.arange(count.sum()) - np.repeat(np.cumsum(count) - count - lo, count)]
+    owner, position = _expand_ranges(lo, hi)
+    a, b = pieces[owner], hosts[position]
     margin = params.fill_margin_m
     within = (
         (component[a] != component[b])
