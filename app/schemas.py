@@ -319,13 +319,15 @@ class History(ResponseModel):
 class QueueItem(Segment):
     """An unreviewed segment worth a look."""
 
-    reason: Literal["disagrees", "uncertain"] = Field(
-        description="'disagrees': the correction changed the model's label"
+    reason: Literal["disagrees", "unchecked", "uncertain"] = Field(
+        description="'disagrees': the correction changed the model's label; 'unchecked': the "
+        "segment stands for a guardrail run (5 or more guardrail segments of a wireframe "
+        "component) no operator has looked at yet"
     )
     score: float = Field(
         description="the change a decision is expected to make: uncertainty (1 at p = 0.5) "
         "weighted by the points it moves and by 1.5 where it joins or splits a guardrail run, "
-        "+ 1 when it disagrees"
+        "+ 1 when it disagrees, + 1 for an unchecked run"
     )
 
 

@@ -16,6 +16,7 @@ from guardrail_core.review.queue import (
     queue_scores,
     segment_queue_scores,
     uncertainty,
+    unchecked_runs,
 )
 
 SORTS = ("id", "uncertainty", "probability", "-probability")
@@ -100,10 +101,12 @@ def review_queue(
 ) -> list[dict[str, Any]]:
     """Unreviewed segments most worth an operator's look, best first.
 
-    A segment whose raw prediction and corrected label disagree (§3.3's correction changed it)
-    comes first; then the change a decision is expected to make orders them: the model's
-    uncertainty (1 at p = 0.5), weighted by the points it moves and by half again where it would
-    join or split a guardrail run (:func:`guardrail_core.review.queue.segment_queue_scores`).
+    A segment whose raw prediction and corrected label disagree (§3.3's correction changed it),
+    and one segment of every guardrail run no operator has looked at yet
+    (:func:`guardrail_core.review.queue.unchecked_runs`), come first; then the change a
+    decision is expected to make orders them: the model's uncertainty (1 at p = 0.5), weighted
+    by the points it moves and by half again where it would join or split a guardrail run
+    (:func:`guardrail_core.review.queue.segment_queue_scores`).
     Segments of fewer than ``MIN_QUEUE_POINTS`` points are left out. With ``run``, the doubtful
     unreviewed segments of that guardrail run (:data:`RUN_DOUBT_SCORE` and above) in order
     along the road, as they were scanned.
@@ -115,8 +118,10 @@ def review_queue(
     """
     seg = session.run.segments
     disagrees = seg["raw_label"] != seg["label"]
-    score = segment_queue_scores(seg)  # the change a decision is expected to make
     reviewed = session.operator_label >= 0
+    score = segment_queue_scores(seg)  # the change a decision is expected to make
+    unchecked = unchecked_runs(seg["component"], seg["label"], seg["n_points"], reviewed, score)
+    score = score + unchecked  # as segment_queue_scores(seg, reviewed)
     if run is None:
         order = queue_order(score, reviewed, n_points=seg["n_points"])[:limit]
     else:
@@ -132,6 +137,8 @@ def review_queue(
         order = doubtful[np.argsort(scanned, kind="stable")][:limit].astype(np.int64)
     rows = segment_rows(session, order)
     for row, s in zip(rows, order, strict=True):
-        row["reason"] = "disagrees" if disagrees[s] else "uncertain"
+        row["reason"] = (
+            "disagrees" if disagrees[s] else "unchecked" if unchecked[s] else "uncertain"
+        )
         row["score"] = round(float(score[s]), 4)
     return rows

@@ -4,7 +4,8 @@ design it never saw.
 Usage::
 
     .venv/bin/python benchmarks/review_loop.py DRIVE [--model MODEL] [--run RUN]
-        [--labels 0,25,50,100,200] [--order queue|random|both] [--seed 0] [--json]
+        [--labels 0,25,50,100,200] [--order queue|random|both] [--seed 0] [--train-seed 0]
+        [--json]
 
 DRIVE is processed with MODEL (default: the shipped default model) into a run (``--run``: an
 existing run of DRIVE instead). Then, for each order, on a copy of that run, an oracle operator
@@ -12,9 +13,10 @@ labels segments with the truth (the class of most of a segment's points) in batc
 count of ``--labels``:
 
 - ``queue``: the review queue's order (:mod:`guardrail_core.review.queue`: disagreement with the
-  label correction first, then the expected change: uncertainty weighted by the points moved
-  and by a run's join or split; segments under 10 points left out), ranked again after every
-  batch from the new predictions, as the app's queue is;
+  label correction and one segment of every guardrail run not looked at yet first, then the
+  expected change: uncertainty weighted by the points moved and by a run's join or split;
+  segments under 10 points left out), ranked again after every batch from the new predictions
+  and the labels given so far, as the app's queue is;
 - ``random``: a random order (``--seed``).
 
 After each batch it fine-tunes exactly as the app's "Train" and "Activate" do
@@ -93,6 +95,7 @@ def learning_curve(
     seed: int,
     reviewed_weight: float | None = None,
     leave_out_contradicted: bool = True,
+    train_seed: int = 0,
 ) -> dict:
     """Label, fine-tune and measure ``run_dir`` (modified in place) at each count of ``labels``."""
     rng = np.random.default_rng(seed)
@@ -112,7 +115,8 @@ def learning_curve(
         if need > 0:
             seg = run.segments
             if order == "queue":
-                ranked = queue_order(segment_queue_scores(seg), reviewed, n_points=seg["n_points"])
+                score = segment_queue_scores(seg, reviewed)
+                ranked = queue_order(score, reviewed, n_points=seg["n_points"])
             else:
                 ranked = random_order[~reviewed[random_order]]
             batch = ranked[:need]
@@ -122,7 +126,7 @@ def learning_curve(
             trained = train_from_run(
                 run,
                 point_labels,
-                params=ClassifierParams(mode="fast"),
+                params=ClassifierParams(mode="fast", seed=train_seed),
                 reviewed_weight=reviewed_weight,
                 leave_out_contradicted=leave_out_contradicted,
             )
@@ -150,6 +154,13 @@ def main() -> int:
     parser.add_argument("--labels", default="0,25,50,100,200")
     parser.add_argument("--order", choices=("queue", "random", "both"), default="both")
     parser.add_argument("--seed", type=int, default=0, help="the random order's seed")
+    parser.add_argument(
+        "--train-seed",
+        type=int,
+        default=0,
+        help="the fine-tuning's seed (the app's is 0); one street's curve moves by a few "
+        "hundredths with it, so compare figures over several",
+    )
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument(
         "--reviewed-weight",
@@ -193,6 +204,7 @@ def main() -> int:
                 args.seed,
                 args.reviewed_weight,
                 leave_out_contradicted=not args.keep_contradicted,
+                train_seed=args.train_seed,
             )
     if args.json:
         print(json.dumps(out, indent=1))

@@ -18,7 +18,7 @@ from guardrail_core.errors import InvalidOptionError
 from guardrail_core.extract.crops import CropParams, crop_window, cut_crop
 from guardrail_core.formats.drive import Drive
 from guardrail_core.formats.run_folder import load_run
-from guardrail_core.review.queue import MIN_QUEUE_POINTS, segment_queue_scores
+from guardrail_core.review.queue import MIN_QUEUE_POINTS, segment_queue_scores, unchecked_runs
 from tests.app_fixtures import copy_run, new_session
 
 
@@ -143,7 +143,9 @@ def test_labels_survive_a_restart(
         reopened.close()
 
 
-def test_queue_puts_disagreement_and_uncertainty_first(client: TestClient, session: ReviewSession):
+def test_queue_puts_disagreement_unchecked_runs_and_uncertainty_first(
+    client: TestClient, session: ReviewSession
+):
     items = client.get("/api/queue", params={"limit": 50}).json()["items"]
     scores = [row["score"] for row in items]
     assert scores == sorted(scores, reverse=True)
@@ -151,15 +153,34 @@ def test_queue_puts_disagreement_and_uncertainty_first(client: TestClient, sessi
     big = seg["n_points"] >= MIN_QUEUE_POINTS
     assert all(row["n_points"] >= MIN_QUEUE_POINTS for row in items)  # too small to judge
     assert (~big).any(), "the test street has tiny segments to leave out"
-    expected = segment_queue_scores(seg)
+    nobody = np.zeros(len(seg["label"]), bool)
+    expected = segment_queue_scores(seg, nobody)
     assert scores == [round(float(expected[row["id"]]), 4) for row in items]
-    disagree = int(((seg["raw_label"] != seg["label"]) & big).sum())
-    assert [row["reason"] for row in items[: min(disagree, 50)]] == ["disagrees"] * min(
-        disagree, 50
+    disagree = (seg["raw_label"] != seg["label"]) & big
+    unchecked = unchecked_runs(
+        seg["component"], seg["label"], seg["n_points"], nobody, segment_queue_scores(seg)
     )
-    first = items[0]["id"]
-    client.put(f"/api/segments/{first}/label", json={"label": "other"})
-    assert first not in [row["id"] for row in client.get("/api/queue").json()["items"]]
+    assert unchecked.any(), "the test street has guardrail runs"
+    first = int((disagree | unchecked).sum())
+    assert 0 < first < 50
+    reasons = [row["reason"] for row in items]
+    assert reasons[first:] == ["uncertain"] * (50 - first)
+    want = ["disagrees" if disagree[row["id"]] else "unchecked" for row in items[:first]]
+    assert reasons[:first] == want and "unchecked" in want
+    # Looking at one segment of a run checks the whole run: its marked segment leaves the queue.
+    ids = [row["id"] for row in items]
+    marked = next(row["id"] for row in items if row["reason"] == "unchecked")
+    same_run = np.flatnonzero((seg["component"] == seg["component"][marked]) & seg["label"])
+    other = int(next(s for s in same_run if s != marked))
+    client.put(f"/api/segments/{other}/label", json={"label": "guardrail"})
+    after = {
+        row["id"]: row for row in client.get("/api/queue", params={"limit": 500}).json()["items"]
+    }
+    assert marked not in after or after[marked]["reason"] != "unchecked"
+    assert other not in after
+    first_id = ids[0]
+    client.put(f"/api/segments/{first_id}/label", json={"label": "other"})
+    assert first_id not in [row["id"] for row in client.get("/api/queue").json()["items"]]
 
 
 def test_selection_round_trip(client: TestClient, session: ReviewSession) -> None:

@@ -232,7 +232,7 @@ def test_the_pages_fields_have_their_types(spec: dict[str, Any]) -> None:
         _success(spec["paths"]["/api/queue"]["get"])["application/json"]["schema"],
         "items[].reason",
     )
-    assert reason is not None and set(reason["enum"]) == {"disagrees", "uncertain"}
+    assert reason is not None and set(reason["enum"]) == {"disagrees", "unchecked", "uncertain"}
     job = _success(spec["paths"]["/api/jobs/{job_id}"]["get"])["application/json"]["schema"]
     status = _field(spec, job, "status")
     assert status is not None and set(status["enum"]) == {

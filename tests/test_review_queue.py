@@ -1,6 +1,6 @@
-"""The review queue's order: corrected-away predictions first, then the change a decision is
-expected to make (uncertainty, points moved, a run joined or split), reviewed and tiny segments
-never; ties in drive order."""
+"""The review queue's order: corrected-away predictions and one segment of every guardrail run
+nobody looked at first, then the change a decision is expected to make (uncertainty, points
+moved, a run joined or split), reviewed and tiny segments never; ties in drive order."""
 
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ from guardrail_core.review.queue import (
     queue_scores,
     segment_queue_scores,
     uncertainty,
+    unchecked_runs,
 )
 
 
@@ -68,3 +69,48 @@ def test_a_decision_counts_by_the_points_it_moves_and_the_run_it_changes() -> No
         "slice_index": slice_index,
     }
     np.testing.assert_allclose(segment_queue_scores(table), score)
+
+
+def test_every_guardrail_run_nobody_looked_at_gets_one_segment_in_front() -> None:
+    """A fence the model is sure of (P 0.9999) would wait behind every doubtful slice; one of its
+    segments comes first until an operator has looked at any segment of it."""
+    #            rail (0): 6 slices, P 0.6-0.8 | fence (1): 5 slices, P 0.9999 | piece (2): 4
+    #            slices | rail (3): 6 slices, one reviewed | other (4): 6 slices, P 0.3
+    component = np.repeat([0, 1, 2, 3, 4], [6, 5, 4, 6, 6])
+    slice_index = np.concatenate(
+        [np.arange(6), np.arange(5), np.arange(4), np.arange(6), np.arange(6)]
+    )
+    probability = np.concatenate(
+        [[0.8, 0.7, 0.6, 0.6, 0.7, 0.8], [0.9999] * 5, [0.9] * 4, [0.6] * 6, [0.3] * 6]
+    )
+    label = probability >= 0.5
+    n_points = np.full(len(label), 200)
+    n_points[1] = 5  # too small to judge: the rail keeps 5 segments of 10 points or more
+    reviewed = np.zeros(len(label), bool)
+    reviewed[17] = True
+    table = {
+        "probability": probability,
+        "raw_label": label,
+        "label": label,
+        "n_points": n_points,
+        "component": component,
+        "slice_index": slice_index,
+    }
+    base = segment_queue_scores(table)
+    unchecked = unchecked_runs(component, label, n_points, reviewed, base)
+    # The rail's most doubtful slices (2 and 3, P 0.6) tie: the first along the drive; the fence's
+    # first slice; not the 4-slice piece, the reviewed rail, or what is labelled other.
+    assert np.flatnonzero(unchecked).tolist() == [2, 6]
+    np.testing.assert_allclose(segment_queue_scores(table, reviewed), base + unchecked)
+    np.testing.assert_array_equal(segment_queue_scores(table), base)
+    before = queue_order(base, reviewed, n_points=n_points)
+    assert before.tolist().index(6) > 15  # sure of itself: after every doubtful slice
+    now = queue_order(segment_queue_scores(table, reviewed), reviewed, n_points=n_points)
+    assert now[:2].tolist() == [2, 6]
+    # Once any segment of the fence is reviewed, it is checked; a 4-slice piece never is.
+    reviewed[9] = True
+    assert np.flatnonzero(unchecked_runs(component, label, n_points, reviewed, base)).tolist() == [
+        2
+    ]
+    assert not unchecked_runs(component, label, n_points, reviewed, base, min_segments=6)[2]
+    assert unchecked_runs(component, label, n_points, reviewed, base, min_segments=4)[11]

@@ -25,6 +25,9 @@ MIN_QUEUE_POINTS = 10
 FULL_WEIGHT_POINTS = 200
 #: How much more a decision counts when it joins two guardrail stretches or removes a lone one.
 RUN_CHANGE_WEIGHT = 0.5
+#: A component labelled guardrail on at least this many segments (of ``MIN_QUEUE_POINTS`` points
+#: or more) is a run an operator should see once (:func:`unchecked_runs`).
+UNCHECKED_RUN_MIN_SEGMENTS = 5
 
 
 def points_weight(n_points: np.ndarray) -> np.ndarray:
@@ -53,6 +56,51 @@ def odd_one_out(component: np.ndarray, slice_index: np.ndarray, label: np.ndarra
     return out
 
 
+def unchecked_runs(
+    component: np.ndarray,
+    label: np.ndarray,
+    n_points: np.ndarray,
+    reviewed: np.ndarray,
+    score: np.ndarray,
+    *,
+    min_segments: int = UNCHECKED_RUN_MIN_SEGMENTS,
+    min_points: int = MIN_QUEUE_POINTS,
+) -> np.ndarray:
+    """(S,) bool: one segment of every guardrail run no operator has looked at yet.
+
+    A run here is a wireframe component (§3.1) labelled guardrail on ``min_segments`` or more
+    segments of ``min_points`` points or more, with no reviewed segment. Of those segments, the
+    one of the highest ``score`` is marked. A model sure of a mistake never offers
+    it as uncertain: a bar fence a model that never saw a design calls guardrail at P 0.9999
+    waits forever behind the doubtful slices of the real rails. One look at each run finds it,
+    and the fine-tuning learns the whole fence from that one label. There are a few tens of
+    such runs on a 300 m street.
+
+    Parameters
+    ----------
+    component : (S,) int, each segment's wireframe component
+    label : (S,) bool, the run's corrected labels
+    n_points : (S,) int, points per segment
+    reviewed : (S,) bool, an operator has labelled the segment
+    score : (S,) float, :func:`queue_scores` (ties: the first along the drive)
+    """
+    label = np.asarray(label, bool)
+    reviewed = np.asarray(reviewed, bool)
+    big = label & (np.asarray(n_points) >= min_points)
+    _, component = np.unique(np.asarray(component), return_inverse=True)
+    n_components = int(component.max()) + 1 if len(component) else 0
+    guardrail = np.bincount(component[big], minlength=n_components)
+    seen = np.bincount(component[reviewed], minlength=n_components) > 0
+    candidates = np.flatnonzero(big & ~seen[component] & (guardrail[component] >= min_segments))
+    # Highest score first within each component; the first of each component is marked.
+    order = candidates[np.lexsort((-np.asarray(score)[candidates], component[candidates]))]
+    first = np.ones(len(order), bool)
+    first[1:] = component[order][1:] != component[order][:-1]
+    out = np.zeros(len(label), bool)
+    out[order[first]] = True
+    return out
+
+
 def queue_scores(
     probability: np.ndarray,
     raw_label: np.ndarray,
@@ -78,16 +126,26 @@ def queue_scores(
     return expected + disagrees.astype(np.float64)
 
 
-def segment_queue_scores(segments: Mapping[str, np.ndarray]) -> np.ndarray:
+def segment_queue_scores(
+    segments: Mapping[str, np.ndarray], reviewed: np.ndarray | None = None
+) -> np.ndarray:
     """(S,) :func:`queue_scores` of a run's segments table (``segments.npz``), every term used:
-    what the review app's queue and the review-loop benchmark rank by."""
-    return queue_scores(
+    what the review app's queue and the review-loop benchmark rank by. With ``reviewed`` (S,)
+    bool, plus 1 on one segment of every guardrail run no operator has looked at yet
+    (:func:`unchecked_runs`)."""
+    score = queue_scores(
         segments["probability"],
         segments["raw_label"],
         segments["label"],
         n_points=segments["n_points"],
         run_change=odd_one_out(segments["component"], segments["slice_index"], segments["label"]),
     )
+    if reviewed is None:
+        return score
+    unchecked = unchecked_runs(
+        segments["component"], segments["label"], segments["n_points"], reviewed, score
+    )
+    return score + unchecked.astype(np.float64)
 
 
 def queue_order(
