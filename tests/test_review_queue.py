@@ -17,6 +17,24 @@ from guardrail_core.review.queue import (
 )
 
 
+def _segments_table(
+    probability: np.ndarray,
+    label: np.ndarray,
+    n_points: np.ndarray,
+    component: np.ndarray,
+    slice_index: np.ndarray,
+) -> dict[str, np.ndarray]:
+    """The fields of ``segments.npz`` the queue reads; the correction changed no label."""
+    return {
+        "probability": probability,
+        "raw_label": label,
+        "label": label,
+        "n_points": n_points,
+        "component": component,
+        "slice_index": slice_index,
+    }
+
+
 def test_uncertainty_peaks_at_a_half_and_counts_no_probability_as_unsure() -> None:
     np.testing.assert_allclose(
         uncertainty(np.array([0.0, 0.25, 0.5, 0.9, 1.0, np.nan])), [0, 0.5, 1, 0.2, 0, 1]
@@ -60,14 +78,7 @@ def test_a_decision_counts_by_the_points_it_moves_and_the_run_it_changes() -> No
     order = queue_order(score, np.zeros(8, bool), n_points=n_points)
     assert order.tolist() == [2, 5, 0, 1, 3, 4, 7]  # 6 (5 points) left out; ties in drive order
     assert 6 in queue_order(score, np.zeros(8, bool), n_points=n_points, min_points=5).tolist()
-    table = {
-        "probability": probability,
-        "raw_label": label,
-        "label": label,
-        "n_points": n_points,
-        "component": component,
-        "slice_index": slice_index,
-    }
+    table = _segments_table(probability, label, n_points, component, slice_index)
     np.testing.assert_allclose(segment_queue_scores(table), score)
 
 
@@ -88,14 +99,7 @@ def test_every_guardrail_run_nobody_looked_at_gets_one_segment_in_front() -> Non
     n_points[1] = 5  # too small to judge: the rail keeps 5 segments of 10 points or more
     reviewed = np.zeros(len(label), bool)
     reviewed[17] = True
-    table = {
-        "probability": probability,
-        "raw_label": label,
-        "label": label,
-        "n_points": n_points,
-        "component": component,
-        "slice_index": slice_index,
-    }
+    table = _segments_table(probability, label, n_points, component, slice_index)
     base = segment_queue_scores(table)
     unchecked = unchecked_runs(component, label, n_points, reviewed, base)
     # The rail's most doubtful slices (2 and 3, P 0.6) tie: the first along the drive; the fence's
