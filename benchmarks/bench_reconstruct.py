@@ -83,6 +83,7 @@ def main() -> int:
         if model_run.model is None:
             continue
         points = models.superimposed_points(model_run.run_id)
+        units = models.superimposed_units(model_run.run_id)
         seconds = []
         for step in range(args.repeats):
             start = time.perf_counter()
@@ -93,6 +94,7 @@ def main() -> int:
                 pole_height=model_run.model.pole_height,
                 n_units=model_run.model.n_units,
                 params=slider_params(params, step),
+                unit_of_point=units,
             )
             seconds.append(time.perf_counter() - start)
         reruns.append(

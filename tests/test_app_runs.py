@@ -7,8 +7,10 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
+from app.scene import tuning
 from app.scene.tuning import RunTuner
 from app.session import ReviewSession
+from guardrail_core.reconstruct.pipeline import reconstruct_unit
 
 
 def test_a_pipe_run_s_histogram_threshold_and_pipes(
@@ -65,3 +67,29 @@ def test_unknown_runs_and_bad_factors_are_refused(
     without = [r for r in tuner.runs if r.model is None]
     if without:
         assert module_client.get(f"/api/runs/{without[0].run_id}/histogram").status_code == 404
+
+
+def test_every_pipe_run_re_run_with_its_thresholds_is_the_stored_model(
+    module_session: ReviewSession, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # The app re-runs a unit model from the superimposed points and the unit each came from,
+    # as the reconstruction did: strays behind one unit are left out alike.
+    given = []
+
+    def spy(*args, **kwargs):  # type: ignore[no-untyped-def]
+        given.append(kwargs.get("unit_of_point"))
+        return reconstruct_unit(*args, **kwargs)
+
+    monkeypatch.setattr(tuning, "reconstruct_unit", spy)
+    tuner = RunTuner(module_session.run.root)
+    pipe_runs = [r for r in tuner.tunable_runs() if r.model and r.model.type == "pipe"]
+    assert pipe_runs
+    for run in pipe_runs:
+        assert run.model is not None
+        assert len(tuner.units(run.run_id)) == len(tuner.points(run.run_id))
+        again = tuner.unit(run.run_id, tuner.params).model
+        np.testing.assert_array_equal(given[-1], tuner.units(run.run_id))
+        assert again.notes == run.model.notes
+        assert [p.kind for p in again.pipes] == [p.kind for p in run.model.pipes]
+        for a, b in zip(again.pipes, run.model.pipes, strict=True):
+            np.testing.assert_allclose(a.axis, b.axis, atol=1e-4)

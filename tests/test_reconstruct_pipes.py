@@ -7,6 +7,7 @@ import pytest
 
 from guardrail_core.errors import ReconstructionError
 from guardrail_core.params import ParameterError
+from guardrail_core.reconstruct.pipeline import reconstruct_unit
 from guardrail_core.reconstruct.pipes import PipeParams, reconstruct_pipes
 from guardrail_core.reconstruct.pipes.crossings import uncross
 from guardrail_core.reconstruct.pipes.curve_pieces import curve_stretches, stretch_turn_deg
@@ -289,6 +290,82 @@ def test_a_wave_whose_flank_the_line_search_took_is_one_curve():
     truth = 0.525 + 0.2 * np.sin(2 * np.pi * x)  # the design: 2 periods per 2 m unit
     assert np.abs(np.interp(x, wave.axis[:, 0], wave.axis[:, 1]) - truth).max() < 0.02
     assert abs(wave.radius - 0.0136) < 0.002
+
+
+def test_a_wave_whose_two_pieces_overlap_on_its_flank_is_one_curve():
+    # A pipe_wave run of a development street (tests/data/README.md): the chain broke on the
+    # flank after the first trough and the two pieces ran past each other's ends by 4 cm, so
+    # the step from the first's end to the second's start pointed back.
+    data = np.load(Path(__file__).parent / "data" / "wave_overlap_dev623.npz")
+    length = float(data["length"])
+    rec = reconstruct_pipes(data["points"].astype(np.float64), length, float(data["pole_radius"]))
+    assert [q.kind for q in rec.pipes] == ["horizontal", "horizontal", "curved"]
+    wave = rec.pipes[2]
+    assert wave.axis[[0, -1], 0] == pytest.approx([0.0, length], abs=0.01)
+    x = np.linspace(0.05, 1.95, 200)
+    truth = 0.525 + 0.2 * np.sin(2 * np.pi * x)
+    assert np.abs(np.interp(x, wave.axis[:, 0], wave.axis[:, 1]) - truth).max() < 0.02
+
+
+def test_strays_behind_one_unit_are_left_out_and_the_king_post_found():
+    # A pipe_arch run of 7 units on a development street (tests/data/README.md): one unit
+    # holds 88 points 3-12 cm behind the rails (a shrub), between the bottom rail and the inner
+    # arch's crown. They bridged the gap under the crown, and a vertical pipe 0.34 m tall stood
+    # there instead of the king post above the outer arch.
+    data = np.load(Path(__file__).parent / "data" / "arch_strays_dev645.npz")
+    points, length = data["points"].astype(np.float64), float(data["length"])
+    rec = reconstruct_pipes(points, length, float(data["pole_radius"]), unit_of_point=data["unit"])
+    [post] = [q for q in rec.pipes if q.kind == "vertical"]
+    assert post.axis[0, 0] == pytest.approx(1.0, abs=0.01)
+    assert np.sort(post.axis[:, 1]) == pytest.approx([0.75, 0.90], abs=0.02)
+    assert [q.kind for q in rec.pipes].count("curved") == 2
+    assert any("no other unit confirms" in note for note in rec.notes)
+    # The unit model the pipeline and the review app make passes the units on.
+    model = reconstruct_unit(
+        points,
+        length,
+        pole_radius=float(data["pole_radius"]),
+        pole_height=0.95,
+        n_units=7,
+        unit_of_point=data["unit"],
+    ).model
+    assert [(q.kind, q.axis.tolist()) for q in model.pipes] == [
+        (q.kind, q.axis.tolist()) for q in rec.pipes
+    ]
+
+
+def _units_of(rng, a, b, r, n, units):
+    """Points of one pipe spread over ``units`` units: (points, unit of each)."""
+    pts = _pipe_points(rng, a, b, r, n)
+    return pts, rng.integers(0, units, n)
+
+
+def test_a_pipe_that_one_unit_alone_shows_in_the_plane_stays():
+    # A scan line running along a diagonal shows it in one unit only; it stands in the plane
+    # of the rails, so nothing asks another unit to confirm it. The same streak 6 cm behind
+    # that plane is a stray and goes.
+    rng = np.random.default_rng(3)
+    parts = [
+        _units_of(rng, [0.0, 0.8], [LENGTH, 0.8], 0.0243, 2500, 4),
+        _units_of(rng, [0.0, 0.3], [LENGTH, 0.3], 0.0243, 2500, 4),
+    ]
+    diagonal = _pipe_points(rng, [0.3, 0.3], [1.0, 0.8], 0.0136, 600)
+    rails = np.vstack([p for p, _ in parts])
+    units = np.concatenate([u for _, u in parts])
+    for depth, kept in ((0.0, True), (-0.06, False)):
+        points = np.vstack([rails, diagonal + [0.0, 0.0, depth]])
+        unit = np.concatenate([units, np.zeros(len(diagonal), np.int64)])
+        rec = reconstruct_pipes(points, LENGTH, POLE_R, unit_of_point=unit)
+        assert ("diagonal" in [q.kind for q in rec.pipes]) is kept
+        # With two units, a pipe one of them hides might be the other's alone: all stay.
+        two = reconstruct_pipes(points, LENGTH, POLE_R, unit_of_point=np.minimum(unit, 1))
+        assert "diagonal" in [q.kind for q in two.pipes]
+
+
+def test_units_of_points_must_match_the_points():
+    points = _pipe_points(np.random.default_rng(0), [0.0, 0.5], [LENGTH, 0.5], 0.02, 500)
+    with pytest.raises(ReconstructionError, match="one unit per point"):
+        reconstruct_pipes(points, LENGTH, POLE_R, unit_of_point=np.zeros(499, np.int64))
 
 
 def test_an_arch_broken_at_its_crown_is_one_arch():

@@ -87,6 +87,7 @@ class RunTuner:
         self.runs = list(self._models.runs)
         self.params = self._models.params
         self._points: dict[int, np.ndarray] = {}
+        self._units: dict[int, np.ndarray] = {}
 
     def tunable_runs(self) -> list[RunModel]:
         """Runs with a unit model (and so superimposed points to re-run it from)."""
@@ -101,6 +102,12 @@ class RunTuner:
         if run_id not in self._points:
             self._points[run_id] = self._models.superimposed_points(run_id)
         return self._points[run_id]
+
+    def units(self, run_id: int) -> np.ndarray:
+        """(M,) the unit each of those points came from."""
+        if run_id not in self._units:
+            self._units[run_id] = self._models.superimposed_units(run_id)
+        return self._units[run_id]
 
     def retune(self, run_id: int, params: ReconstructionParams) -> Retuned:
         """Re-run the unit model of a run with ``params`` and rebuild its mesh.
@@ -131,6 +138,7 @@ class RunTuner:
             pole_height=run.model.pole_height,
             n_units=run.model.n_units,
             params=params,
+            unit_of_point=self.units(run_id),
         )
 
 

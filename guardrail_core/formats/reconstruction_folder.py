@@ -203,6 +203,23 @@ class ReconstructionFolder:
                 f"{self.superimposed_file}: no superimposed points of run {run_id} ({exc})"
             ) from exc
 
+    def superimposed_units(self, run_id: int) -> np.ndarray:
+        """(M,) int64: the unit each of a run's superimposed points came from.
+
+        Raises
+        ------
+        RunFolderError
+            ``superimposed.npz`` is missing or holds no units of that run.
+        """
+        key = superimposed_unit_key(run_id)
+        try:
+            with np.load(self.superimposed_file, allow_pickle=False) as data:
+                return np.asarray(data[key], np.int64)
+        except (OSError, KeyError, ValueError) as exc:
+            raise RunFolderError(
+                f"{self.superimposed_file}: no superimposed units of run {run_id} ({exc})"
+            ) from exc
+
 
 def read_versioned_json(
     path: Path, version: Any, mismatch: Callable[[Any], GuardrailError]

@@ -156,6 +156,7 @@ def reconstruct_unit(
     pole_height: float,
     n_units: int,
     params: ReconstructionParams = ReconstructionParams(),
+    unit_of_point: np.ndarray | None = None,
 ) -> UnitReconstruction:
     """The unit model of superimposed unit points: beam section or pipes (§4.3-4.4).
 
@@ -165,6 +166,8 @@ def reconstruct_unit(
     ----------
     points : (N, 3) float64, unit coordinates (metres), pole points removed
     length : float, metres between the pole axes
+    unit_of_point : (N,) int, the unit each point came from; pipes then keep only the points
+        another unit confirms (:mod:`guardrail_core.reconstruct.pipes.consensus`)
     """
     kind = unit_type(points, length, params.beams)
     if kind == "beam":
@@ -179,7 +182,9 @@ def reconstruct_unit(
             notes=tuple(beam.notes),
         )
         return UnitReconstruction(model, None)
-    pipes = reconstruct_pipes(points, length, pole_radius, params.pipes)
+    pipes = reconstruct_pipes(
+        points, length, pole_radius, params.pipes, unit_of_point=unit_of_point
+    )
     model = UnitModel(
         type="pipe",
         length=length,
@@ -200,6 +205,7 @@ def unit_model(
     pole_height: float,
     n_units: int,
     params: ReconstructionParams = ReconstructionParams(),
+    unit_of_point: np.ndarray | None = None,
 ) -> UnitModel:
     """The unit model alone (see :func:`reconstruct_unit`)."""
     return reconstruct_unit(
@@ -209,6 +215,7 @@ def unit_model(
         pole_height=pole_height,
         n_units=n_units,
         params=params,
+        unit_of_point=unit_of_point,
     ).model
 
 
@@ -294,6 +301,7 @@ def reconstruct_run(
         pole_height=float(np.median([p.height for p in poles])),
         n_units=len(used),
         params=params,
+        unit_of_point=superimposed.unit_of_point,
     )
     return RunModel(run_id, poles, frames, model, registered, len(xyz), notes), superimposed
 

@@ -54,6 +54,10 @@ class RunModels:
         """(M, 3) float64: a run's superimposed unit points, unit coordinates (metres)."""
         return self.folder.superimposed_points(run_id)
 
+    def superimposed_units(self, run_id: int) -> np.ndarray:
+        """(M,) int64: the unit each of those points came from."""
+        return self.folder.superimposed_units(run_id)
+
 
 def load_run_models(run: str | Path | RunFolder) -> RunModels:
     """The reconstruction of a run folder.

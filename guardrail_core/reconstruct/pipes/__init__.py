@@ -7,7 +7,9 @@ unit shape, its axis polyline in the same coordinates.
 
 The steps follow §4.3, one module each:
 
-1. points within the poles (x near 0 and ``length``) are dropped;
+1. points within the poles (x near 0 and ``length``) are dropped, and, in runs of several
+   units, the points behind the unit's plane that no other unit confirms (:mod:`.consensus`:
+   a shrub against one unit's rails);
 2. vertical pipes (:mod:`.verticals`): a histogram of x (:mod:`.histogram`); contiguous regions
    above a threshold are candidate vertical pipes; the diameter is the width holding a share of
    their points, the skeleton sits at the centre of that width and spans the points' height
@@ -51,6 +53,7 @@ import numpy as np
 from guardrail_core.errors import ReconstructionError
 from guardrail_core.reconstruct.model import PIPE_KINDS, Pipe
 from guardrail_core.reconstruct.pipes.chains import chained_pipes
+from guardrail_core.reconstruct.pipes.consensus import confirmed_by_another_unit
 from guardrail_core.reconstruct.pipes.curve_pieces import curve_stretches, runs_along_a_curve
 from guardrail_core.reconstruct.pipes.histogram import PipeHistogram, x_histogram
 from guardrail_core.reconstruct.pipes.inputs import check_length, check_unit_points
@@ -96,6 +99,7 @@ def reconstruct_pipes(
     params: PipeParams = PipeParams(),
     *,
     rng: np.random.Generator | int | None = 0,
+    unit_of_point: np.ndarray | None = None,
 ) -> PipeReconstruction:
     """Reconstruct the pipes of a unit shape from superimposed unit points.
 
@@ -114,6 +118,9 @@ def reconstruct_pipes(
         The randomness of the line search (:mod:`.line_search`). The default seed 0 gives the
         same pipes on every call; None draws fresh entropy; a Generator is used as it is (and
         advanced).
+    unit_of_point : (N,) int or None
+        The unit each point came from. Given, and with ``confirm_min_units`` units or more,
+        points no other unit confirms are dropped first (:mod:`.consensus`).
 
     Returns
     -------
@@ -146,7 +153,26 @@ def reconstruct_pipes(
         raise ReconstructionError(
             f"the unit (length {length} m) is shorter than its two poles and margins ({2 * x0} m)"
         )
-    pts = pts[(pts[:, 0] > x0) & (pts[:, 0] < x1)]
+    between = (pts[:, 0] > x0) & (pts[:, 0] < x1)
+    pts = pts[between]
+    if unit_of_point is not None:
+        units = np.asarray(unit_of_point).reshape(-1)
+        if len(units) != len(between):
+            raise ReconstructionError(
+                f"{len(between)} points but {len(units)} units of points: one unit per point"
+            )
+        units = units[between]
+        behind = (
+            pts[:, 2] < np.median(pts[:, 2]) - p.confirm_behind_m if len(pts) else pts[:, 2] > 0
+        )
+        if behind.any() and len(np.unique(units)) >= p.confirm_min_units:
+            stray = behind & ~confirmed_by_another_unit(pts, units, p.confirm_cell_m)
+            if stray.any():
+                notes.append(
+                    f"{int(stray.sum())} of {len(pts)} points behind the unit's plane, which "
+                    "no other unit confirms, were left out"
+                )
+            pts = pts[~stray]
 
     # §4.3, Fig. 14: histogram of points along x.
     histogram = x_histogram(pts[:, 0], x0, x1, p)

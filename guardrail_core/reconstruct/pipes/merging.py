@@ -10,6 +10,7 @@ import numpy as np
 from guardrail_core.errors import ReconstructionError
 from guardrail_core.reconstruct.pipes.params import PipeParams
 from guardrail_core.reconstruct.pipes.polylines import (
+    distance_to_polyline,
     end_direction,
     resample,
     share_near,
@@ -64,7 +65,8 @@ def merge_fragments(skels: list[Skeleton], pts: np.ndarray, p: PipeParams) -> li
     ``horizontal_angle_deg``, ends within ``link_distance_m`` of the other's line) with at most
     ``merge_gap_m`` between them; two pieces merge end to start when the gap is at most
     ``merge_gap_m`` and the step from one to the other continues both directions (within
-    ``merge_angle_deg``). The first such pair in x order is merged, then the search starts
+    ``merge_angle_deg``), or when their ends ran past each other along one curve
+    (:func:`_overlap`). The first such pair in x order is merged, then the search starts
     again (the merged piece is shaped anew).
     """
     while True:
@@ -100,6 +102,8 @@ def _can_merge(a: Skeleton, b: Skeleton, p: PipeParams, cos_turn: float, sin_lin
             return False
         na = np.array([-da[1], da[0]])
         return bool(np.all(np.abs((b.xy - a.xy[0]) @ na) <= p.link_distance_m))
+    if gap < 0 and _overlap(a, b, p, cos_turn):
+        return True
     if gap < -p.link_distance_m:
         return False
     step = b_start - a_end
@@ -112,6 +116,25 @@ def _can_merge(a: Skeleton, b: Skeleton, p: PipeParams, cos_turn: float, sin_lin
         return bool(ea @ sb >= cos_turn)
     step = step / n
     return bool(ea @ step >= cos_turn and sb @ step >= cos_turn)
+
+
+def _overlap(a: Skeleton, b: Skeleton, p: PipeParams, cos_turn: float) -> bool:
+    """Whether ``b`` takes over from ``a`` where both follow one curve: ``b`` starts behind
+    ``a``'s end (by at most ``merge_gap_m`` in x), each of those two ends lies within
+    ``link_distance_m`` of the other piece, and the pieces head the same way there (within
+    ``merge_angle_deg``). A wave's chain broken on its flank, with the two pieces' ends run
+    past each other, leaves this; the step from end to start then points back."""
+    if {a.kind, b.kind} & {"horizontal", "vertical"}:
+        return False
+    if a.xy[-1, 0] - b.xy[0, 0] > p.merge_gap_m:
+        return False
+    b_on_a, _ = distance_to_polyline(b.xy[:1], a.xy)
+    a_on_b, _ = distance_to_polyline(a.xy[-1:], b.xy)
+    if b_on_a[0] > p.link_distance_m or a_on_b[0] > p.link_distance_m:
+        return False
+    ea = end_direction(a.xy, p, end=True)
+    sb = -end_direction(b.xy, p, end=False)
+    return bool(ea @ sb >= cos_turn)
 
 
 def merge_meetings(skels: list[Skeleton], p: PipeParams) -> list[Skeleton]:

@@ -85,6 +85,30 @@ class PipeParams(StageParams):
         "median's distance from its middle (pipes/measure.py).",
     )
 
+    # -- points another unit confirms (§4.2) -----------------------------------------------------
+    confirm_cell_m: float = param(
+        0.02,
+        unit="m",
+        gt=0,
+        doc="A superimposed point is kept only where a point of another unit lies in its cube "
+        "of this size or in one of the 26 around it: what one unit alone holds there (a shrub "
+        "against its rails, a hedge's face behind them) is not the unit shape.",
+    )
+    confirm_behind_m: float = param(
+        0.03,
+        unit="m",
+        ge=0,
+        doc="Only points more than this behind the median depth of the unit's points need "
+        "another unit to confirm them: a pipe that one unit alone shows (a scan line along a "
+        "diagonal) stands in the unit's plane.",
+    )
+    confirm_min_units: int = param(
+        3,
+        ge=2,
+        doc="Runs of fewer superimposed units keep all their points (with two, a pipe one unit "
+        "hides would go with the strays).",
+    )
+
     # -- vertical pipes (§4.3, Fig. 15) -----------------------------------------------------------
     vertical_min_length_m: float = param(
         0.1, unit="m", gt=0, doc="A vertical pipe's points cover at least this height, gap-free."
