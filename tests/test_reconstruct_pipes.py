@@ -334,6 +334,30 @@ def test_strays_behind_one_unit_are_left_out_and_the_king_post_found():
     ]
 
 
+def test_a_far_runs_king_post_under_the_histogram_threshold_is_found():
+    # A pipe_arch run of 7 units across the road on a development street (tests/data/
+    # README.md): the arches' crowns lift the histogram around the king post above the
+    # post's own peak, and 13 of its points stand clear of the rail and the arch. Standing
+    # 0.12 m tall in its 3 cm window, it is a candidate, and holds enough points to be one.
+    data = np.load(Path(__file__).parent / "data" / "arch_far_king_post_dev702.npz")
+    rec = reconstruct_pipes(
+        data["points"].astype(np.float64),
+        float(data["length"]),
+        float(data["pole_radius"]),
+        unit_of_point=data["unit"],
+    )
+    assert [q.kind for q in rec.pipes] == [
+        "horizontal",
+        "horizontal",
+        "vertical",
+        "curved",
+        "curved",
+    ]
+    post = rec.pipes[2]
+    assert post.axis[0, 0] == pytest.approx(1.0, abs=0.01)
+    assert np.sort(post.axis[:, 1]) == pytest.approx([0.75, 0.90], abs=0.02)
+
+
 def _units_of(rng, a, b, r, n, units):
     """Points of one pipe spread over ``units`` units: (points, unit of each)."""
     pts = _pipe_points(rng, a, b, r, n)

@@ -163,6 +163,14 @@ class PipeParams(StageParams):
         "over, the least half-width of their window, and the gap beyond their radius where the "
         "pipes crossing their ends are looked for.",
     )
+    short_min_inner_points: int = param(
+        8,
+        ge=3,
+        doc="Fewest points a short vertical candidate must hold a slice interval in from both "
+        "its ends, where the pipes across them do not reach (its drift is measured on them). "
+        "A king post of a far or short run holds 9-13 there; the pipe as a whole still needs "
+        "min_points.",
+    )
     short_drift_m: float = param(
         0.015,
         unit="m",

@@ -28,7 +28,8 @@ def short_verticals(
 
     The histogram of those points (bins ``edges``, (B + 1,) metres) is summed over
     ``short_window_m`` (the points are few) and its threshold is ``histogram_factor`` times its
-    median over the filled bins (the level of the curved pipes). A peak is a short vertical
+    median over the filled bins (the level of the curved pipes); windows whose points stand
+    tall are candidates too (:func:`_tall_windows`). A candidate is a short vertical
     when its points stand within ``short_drift_m`` of one x over at least
     ``vertical_min_length_m`` and pipes run across both its ends. The foot of an arch, as steep,
     fails that: at its top the arch goes on to one side only.
@@ -59,8 +60,9 @@ def short_verticals(
     threshold = max(
         p.histogram_factor * float(np.median(counts[counts > 0])), p.histogram_min_count
     )
-    starts, stops = regions_above(counts, threshold)
     x, y = pts[off, 0], pts[off, 1]
+    tall = _tall_windows(x, y, edges, width, p)
+    starts, stops = regions_above(np.where(tall, np.inf, counts), threshold)
     skels: list[Skeleton] = []
     taken = np.zeros(len(off), dtype=bool)
     for a, b in zip(starts, stops, strict=True):
@@ -75,7 +77,7 @@ def short_verticals(
                 break
             y0, y1 = longest_chain(y[sel], p.vertical_gap_m)
             inner = sel & (y > y0 + p.slice_interval_m) & (y < y1 - p.slice_interval_m)
-            if y1 - y0 < p.vertical_min_length_m or inner.sum() < p.min_points:
+            if y1 - y0 < p.vertical_min_length_m or inner.sum() < p.short_min_inner_points:
                 break
             qlo, qhi = central_quantiles(x[inner], p.radius_share)
             centre, radius = 0.5 * (qlo + qhi), 0.5 * (qhi - qlo) / p.radius_share
@@ -95,6 +97,31 @@ def short_verticals(
         skels.append(Skeleton(xy=xy, kind="vertical", idx=off[band]))
     mask[np.flatnonzero(keep)[taken]] = True
     return skels, mask
+
+
+def _tall_windows(
+    x: np.ndarray, y: np.ndarray, edges: np.ndarray, width: int, p: PipeParams
+) -> np.ndarray:
+    """Mask (B,) of the bins whose window of ``width`` bins holds ``min_points`` or more points
+    (x, y) standing ``vertical_min_length_m`` tall without a gap over ``vertical_gap_m``.
+
+    Where an arch's crown passes under a king post, its points lift the histogram all around
+    the post, and the post of a sparse run (the far side, a few units) stays under the
+    threshold; standing tall in its window, it is a candidate still. An arch's feet stand tall
+    too, and fail as before (their drift, or no pipe across their top on both sides).
+    """
+    n_bins = len(edges) - 1
+    tall = np.zeros(n_bins, dtype=bool)
+    order = np.argsort(x, kind="stable")
+    xs, ys = x[order], y[order]
+    half = 0.5 * width * (edges[1] - edges[0])
+    centres = 0.5 * (edges[:-1] + edges[1:])
+    lo = np.searchsorted(xs, centres - half)
+    hi = np.searchsorted(xs, centres + half, side="right")
+    for k in np.flatnonzero(hi - lo >= p.min_points):
+        y0, y1 = longest_chain(ys[lo[k] : hi[k]], p.vertical_gap_m)
+        tall[k] = y1 - y0 >= p.vertical_min_length_m
+    return tall
 
 
 def _drift(x: np.ndarray, y: np.ndarray) -> float:
