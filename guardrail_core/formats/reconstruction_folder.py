@@ -194,14 +194,7 @@ class ReconstructionFolder:
         RunFolderError
             ``superimposed.npz`` is missing or holds no points of that run.
         """
-        key = superimposed_points_key(run_id)
-        try:
-            with np.load(self.superimposed_file, allow_pickle=False) as data:
-                return np.asarray(data[key], np.float64)
-        except (OSError, KeyError, ValueError) as exc:
-            raise RunFolderError(
-                f"{self.superimposed_file}: no superimposed points of run {run_id} ({exc})"
-            ) from exc
+        return self._superimposed(superimposed_points_key(run_id), np.float64, "points", run_id)
 
     def superimposed_units(self, run_id: int) -> np.ndarray:
         """(M,) int64: the unit each of a run's superimposed points came from.
@@ -211,13 +204,16 @@ class ReconstructionFolder:
         RunFolderError
             ``superimposed.npz`` is missing or holds no units of that run.
         """
-        key = superimposed_unit_key(run_id)
+        return self._superimposed(superimposed_unit_key(run_id), np.int64, "units", run_id)
+
+    def _superimposed(self, key: str, dtype: type, what: str, run_id: int) -> np.ndarray:
+        """The array ``key`` of ``superimposed.npz`` as ``dtype``; the errors named above."""
         try:
             with np.load(self.superimposed_file, allow_pickle=False) as data:
-                return np.asarray(data[key], np.int64)
+                return np.asarray(data[key], dtype)
         except (OSError, KeyError, ValueError) as exc:
             raise RunFolderError(
-                f"{self.superimposed_file}: no superimposed units of run {run_id} ({exc})"
+                f"{self.superimposed_file}: no superimposed {what} of run {run_id} ({exc})"
             ) from exc
 
 
