@@ -53,7 +53,7 @@ import numpy as np
 from guardrail_core.errors import ReconstructionError
 from guardrail_core.reconstruct.model import PIPE_KINDS, Pipe
 from guardrail_core.reconstruct.pipes.chains import chained_pipes
-from guardrail_core.reconstruct.pipes.consensus import confirmed_by_another_unit
+from guardrail_core.reconstruct.pipes.consensus import strays_behind
 from guardrail_core.reconstruct.pipes.curve_pieces import curve_stretches, runs_along_a_curve
 from guardrail_core.reconstruct.pipes.histogram import PipeHistogram, x_histogram
 from guardrail_core.reconstruct.pipes.inputs import check_length, check_unit_points
@@ -119,8 +119,8 @@ def reconstruct_pipes(
         same pipes on every call; None draws fresh entropy; a Generator is used as it is (and
         advanced).
     unit_of_point : (N,) int or None
-        The unit each point came from. Given, and with ``confirm_min_units`` units or more,
-        points no other unit confirms are dropped first (:mod:`.consensus`).
+        The unit each point came from. Given, the points behind the unit's plane that no
+        other unit confirms are dropped first (:func:`.consensus.strays_behind`).
 
     Returns
     -------
@@ -161,17 +161,12 @@ def reconstruct_pipes(
             raise ReconstructionError(
                 f"{len(between)} points but {len(units)} units of points: one unit per point"
             )
-        units = units[between]
-        behind = (
-            pts[:, 2] < np.median(pts[:, 2]) - p.confirm_behind_m if len(pts) else pts[:, 2] > 0
-        )
-        if behind.any() and len(np.unique(units)) >= p.confirm_min_units:
-            stray = behind & ~confirmed_by_another_unit(pts, units, p.confirm_cell_m)
-            if stray.any():
-                notes.append(
-                    f"{int(stray.sum())} of {len(pts)} points behind the unit's plane, which "
-                    "no other unit confirms, were left out"
-                )
+        stray = strays_behind(pts, units[between], p)
+        if stray.any():
+            notes.append(
+                f"{int(stray.sum())} of {len(pts)} points behind the unit's plane, which no "
+                "other unit confirms, were left out"
+            )
             pts = pts[~stray]
 
     # §4.3, Fig. 14: histogram of points along x.

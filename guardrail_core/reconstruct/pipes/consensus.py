@@ -1,8 +1,9 @@
 """Points that another unit confirms (§4.2-4.3): the unit shape is what repeats unit after
-unit, so a point of the superimposition with no point of another unit near it is not part of
-it. A shrub pressed against one unit's rails, or a hedge's face behind it, leaves streaks of
-points that the chaining of §4.3 follows as pipes or that pull a wave's chain off its course;
-the pipes themselves are scanned in every unit where they are seen.
+unit. A shrub pressed against one unit's rails, or a hedge's face behind them, leaves streaks
+of points that the chaining of §4.3 follows as pipes, that pull a wave's chain off its course,
+or that fill the gap under an arch's crown. Such points behind the unit's plane with no point
+of another unit near them are strays (:func:`strays_behind`). In the plane a pipe may show in
+one unit alone (a scan line running along a diagonal), so there nothing is asked of them.
 
 Near means in the same cube of ``confirm_cell_m`` or in one of its 26 neighbours (so within
 one to two cells): cubes rather than a radius, since a dense superimposition holds hundreds of
@@ -16,11 +17,36 @@ import itertools
 import numpy as np
 
 from guardrail_core.errors import ReconstructionError
+from guardrail_core.reconstruct.pipes.params import PipeParams
 
 #: Cube offsets of a cell's neighbourhood, itself included: (27, 3).
 _NEIGHBOURS = np.array(list(itertools.product((-1, 0, 1), repeat=3)), np.int64)
 #: Keys of cells hold each coordinate, shifted to be non-negative, in this many bits.
 _BITS = 20
+
+
+def strays_behind(points: np.ndarray, unit_of_point: np.ndarray, p: PipeParams) -> np.ndarray:
+    """Mask (N,) of the points (N, 3) more than ``confirm_behind_m`` behind the median depth
+    (z) of all of them that no other unit confirms (``confirm_cell_m``); none in a run of fewer
+    than ``confirm_min_units`` units.
+
+    Raises
+    ------
+    ReconstructionError
+        The arrays disagree in length.
+    """
+    points = np.asarray(points, np.float64).reshape(-1, 3)
+    unit = np.asarray(unit_of_point).reshape(-1)
+    if len(unit) != len(points):
+        raise ReconstructionError(
+            f"{len(points)} points but {len(unit)} units of points: one unit per point"
+        )
+    if len(points) == 0 or len(np.unique(unit)) < p.confirm_min_units:
+        return np.zeros(len(points), bool)
+    behind = points[:, 2] < np.median(points[:, 2]) - p.confirm_behind_m
+    if not behind.any():
+        return behind
+    return behind & ~confirmed_by_another_unit(points, unit, p.confirm_cell_m)
 
 
 def confirmed_by_another_unit(

@@ -90,17 +90,18 @@ class PipeParams(StageParams):
         0.02,
         unit="m",
         gt=0,
-        doc="A superimposed point is kept only where a point of another unit lies in its cube "
-        "of this size or in one of the 26 around it: what one unit alone holds there (a shrub "
-        "against its rails, a hedge's face behind them) is not the unit shape.",
+        doc="Another unit confirms a superimposed point where one of its points lies in the "
+        "point's cube of this size or in one of the 26 around it (see confirm_behind_m): what "
+        "one unit alone holds behind the rails (a shrub against them, a hedge's face) is not "
+        "the unit shape.",
     )
     confirm_behind_m: float = param(
         0.03,
         unit="m",
         ge=0,
-        doc="Only points more than this behind the median depth of the unit's points need "
-        "another unit to confirm them: a pipe that one unit alone shows (a scan line along a "
-        "diagonal) stands in the unit's plane.",
+        doc="Points more than this behind the median depth of the unit's points are left out "
+        "unless another unit confirms them; those in front need no confirming: a pipe that "
+        "one unit alone shows (a scan line along a diagonal) stands in the unit's plane.",
     )
     confirm_min_units: int = param(
         3,
