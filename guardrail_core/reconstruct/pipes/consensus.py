@@ -5,9 +5,10 @@ or that fill the gap under an arch's crown. Such points behind the unit's plane 
 of another unit near them are strays (:func:`strays_behind`). In the plane a pipe may show in
 one unit alone (a scan line running along a diagonal), so there nothing is asked of them.
 
-Near means in the same cube of ``confirm_cell_m`` or in one of its 26 neighbours (so within
-one to two cells): cubes rather than a radius, since a dense superimposition holds hundreds of
-points within a few centimetres of each point, too many to list pair by pair.
+Near means in the same cube of ``confirm_cell_m`` or in one of its 26 neighbours (so up to
+two cells apart along each axis): cubes rather than a radius, since a dense superimposition
+holds hundreds of points within a few centimetres of each point, too many to list pair by
+pair.
 """
 
 from __future__ import annotations
