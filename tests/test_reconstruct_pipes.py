@@ -12,9 +12,9 @@ from guardrail_core.reconstruct.pipes import PipeParams, reconstruct_pipes
 from guardrail_core.reconstruct.pipes.crossings import uncross
 from guardrail_core.reconstruct.pipes.curve_pieces import curve_stretches, stretch_turn_deg
 from guardrail_core.reconstruct.pipes.measure import radius_and_axis
-from guardrail_core.reconstruct.pipes.merging import merge_meetings
+from guardrail_core.reconstruct.pipes.merging import merge_fragments, merge_meetings
 from guardrail_core.reconstruct.pipes.polylines import resample
-from guardrail_core.reconstruct.pipes.skeleton import Skeleton
+from guardrail_core.reconstruct.pipes.skeleton import Chain, Skeleton
 from guardrail_core.reconstruct.pipes.slices import slice_labels
 from guardrail_core.reconstruct.pipes.tracking import Centre, Track
 
@@ -307,6 +307,65 @@ def test_a_wave_whose_two_pieces_overlap_on_its_flank_is_one_curve():
     assert np.abs(np.interp(x, wave.axis[:, 0], wave.axis[:, 1]) - truth).max() < 0.02
 
 
+def _one_wave(name):
+    """The fixture's pipes reconstructed (with its units): two rails and one curve, which
+    follows the design's sine within 2 cm from pole to pole."""
+    data = np.load(Path(__file__).parent / "data" / name)
+    length = float(data["length"])
+    rec = reconstruct_pipes(
+        data["points"].astype(np.float64),
+        length,
+        float(data["pole_radius"]),
+        unit_of_point=data["unit"],
+    )
+    [wave] = [q for q in rec.pipes if q.kind == "curved"]
+    assert [q.kind for q in rec.pipes].count("horizontal") == 2
+    assert wave.axis[[0, -1], 0] == pytest.approx([0.0, length], abs=0.01)
+    x = np.linspace(0.05, 1.95, 200)
+    truth = 0.525 + 0.2 * np.sin(2 * np.pi * x)
+    assert np.abs(np.interp(x, wave.axis[:, 0], wave.axis[:, 1]) - truth).max() < 0.02
+    return rec
+
+
+def test_a_wave_broken_at_a_trough_is_one_curve():
+    # A pipe_wave run of a development street (tests/data/README.md): the chain broke at the
+    # first trough, 4 cm apart, and the chords of the two pieces' ends turn 50-60° there.
+    _one_wave("wave_trough_dev632.npz")
+
+
+def test_a_wave_piece_that_starts_with_a_hook_beside_a_crest_continues_the_wave():
+    # A pipe_wave run of a development street (tests/data/README.md): the second piece began
+    # beside the second crest, 7 cm under the first's end, and joined the wave 5 cm on.
+    _one_wave("wave_hook_dev622.npz")
+
+
+def test_pieces_on_one_parabola_merge_and_the_hook_is_left_out():
+    # A trough at x = 0.75 m (the design's sine), the chain broken 5 cm across it.
+    x_a = np.arange(0.40, 0.741, 0.03)
+    a = _chained(np.column_stack([x_a, 0.525 - 0.2 * np.cos(2 * np.pi * (x_a - 0.75))]))
+    x = np.arange(0.78, 1.11, 0.03)
+    y = 0.525 - 0.2 * np.cos(2 * np.pi * (x - 0.75))
+    b = _chained(np.column_stack([x, y]))
+    [one] = merge_fragments([a, b], np.zeros((0, 3)), PipeParams())
+    assert one.kind == "curved" and one.xy[[0, -1], 0] == pytest.approx([x_a[0], x[-1]], abs=0.01)
+    # The same second piece starting with two centres 5 cm off the curve: they go.
+    hooked = _chained(np.vstack([[[0.76, 0.40], [0.78, 0.39]], np.column_stack([x[1:], y[1:]])]))
+    [one] = merge_fragments([a, hooked], np.zeros((0, 3)), PipeParams())
+    assert one.chain is not None
+    cx, cy = one.chain.centres.T
+    assert np.abs(cy - (0.525 - 0.2 * np.cos(2 * np.pi * (cx - 0.75)))).max() < 0.01
+    # Another curve 0.2 m higher (an arch beside another) stays apart.
+    above = _chained(np.column_stack([x, y + 0.2]))
+    assert len(merge_fragments([a, above], np.zeros((0, 3)), PipeParams())) == 2
+
+
+def _chained(xy):
+    """A curved skeleton chained from the centres ``xy`` (K, 2), with no points."""
+    xy = np.asarray(xy, np.float64)
+    chain = Chain(centres=xy, shared=np.zeros(len(xy), bool), own=np.zeros(0, np.int64))
+    return Skeleton(xy=xy, kind="curved", idx=np.zeros(0, np.int64), chain=chain)
+
+
 def test_strays_behind_one_unit_are_left_out_and_the_king_post_found():
     # A pipe_arch run of 7 units on a development street (tests/data/README.md): one unit
     # holds 88 points 3-12 cm behind the rails (a shrub), between the bottom rail and the inner
@@ -348,6 +407,25 @@ def test_a_far_runs_king_post_under_the_histogram_threshold_is_found():
     )
     post = _arch_king_post(rec, x_tol=0.01)
     assert np.abs(np.sort(post.axis[:, 1]) - [0.75, 0.9]).max() < 0.02
+
+
+def test_a_sparse_king_post_keeps_what_it_held_between_the_pipes_across_its_ends():
+    # A pipe_arch run of 3 units on a development street (tests/data/README.md): the king post
+    # was found, 0.12 m tall, but the outer arch's crown and the top rail took its ends' points
+    # and 10 were left, where every other pipe needs min_points (15).
+    data = np.load(Path(__file__).parent / "data" / "arch_sparse_king_post_dev708.npz")
+    points, length = data["points"].astype(np.float64), float(data["length"])
+    args = (points, length, float(data["pole_radius"]))
+    rec = reconstruct_pipes(*args, unit_of_point=data["unit"])
+    [post] = [q for q in rec.pipes if q.kind == "vertical"]
+    assert post.axis[0, 0] == pytest.approx(1.0, abs=0.01)
+    assert np.sort(post.axis[:, 1]) == pytest.approx([0.75, 0.90], abs=0.02)
+    assert PipeParams().short_min_inner_points <= post.n_points < PipeParams().min_points
+    # Asked for more points than it holds, it is no pipe.
+    fewer = reconstruct_pipes(
+        *args, PipeParams(short_min_inner_points=11), unit_of_point=data["unit"]
+    )
+    assert not [q for q in fewer.pipes if q.kind == "vertical"]
 
 
 def _units_of(rng, a, b, r, n, units):

@@ -228,6 +228,25 @@ def test_a_pole_whose_foot_was_taken_for_road_still_stands_on_the_ground():
     assert z_err.max() < 0.02
 
 
+@pytest.mark.parametrize("seed", [15, 16, 17])
+def test_a_pole_whose_road_foot_ends_a_scan_line_below_the_rest_still_stands(seed):
+    # The scan lines cross a pole on the verge some 0.07 m apart: the road mask takes the
+    # pole up to one line and the next line crosses it higher (development street 704: road
+    # points to 0.13 m, the pole's guardrail points from 0.20 m). Here the road foot ends at
+    # 0.10 m and nothing is seen up to 0.15 m.
+    run = make_run(3, pole_points=160, seed=seed)
+    xyz, ground = _feet_as_road(run, 0.10)
+    near = np.linalg.norm(xyz[:, None, :2] - run.poles[None, :, :2], axis=2).argmin(axis=1)
+    height = xyz[:, 2] - run.poles[near, 2]
+    on_pole = np.linalg.norm(xyz[:, :2] - run.poles[near, :2], axis=1) < 2 * run.pole_radius
+    xyz = xyz[~(on_pole & (height < 0.15))]
+    det = detect_poles(xyz, ground)
+    xy_err, z_err = _match(det, run.poles)
+    assert xy_err.max() < 0.01 and z_err.max() < 0.01
+    # A foot that steps farther than foot_gap_m does not reach the ground.
+    assert detect_poles(xyz, ground, PoleParams(foot_gap_m=0.04)).poles == []
+
+
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_posts_seen_over_a_narrow_arc_take_the_radius_that_fits_the_run(seed):
     # A beam hides its posts: the scanner sees a 60-degree strip of each (facing +y, the road),

@@ -208,8 +208,11 @@ def reconstruct_pipes(
     skels = merge_meetings(skels, p)
     # Radius and depth of each pipe from its points.
     pipes = []
+    # A short vertical shares its ends' points with the pipes across them: what it keeps is
+    # what it held between them.
+    short_ids = {id(s) for s in short}
     for s, m in zip(skels, measure_pipes(pts, skels, p), strict=True):
-        if m.n_points < p.min_points:
+        if m.n_points < (p.short_min_inner_points if id(s) in short_ids else p.min_points):
             notes.append(
                 f"a {s.kind} pipe near x={m.xy[:, 0].mean():.2f} m, y={m.xy[:, 1].mean():.2f} m "
                 f"kept only {m.n_points} points: dropped"

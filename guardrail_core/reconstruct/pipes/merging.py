@@ -23,6 +23,11 @@ from guardrail_core.reconstruct.pipes.skeleton import Chain, Skeleton
 _TINY_GAP = 1e-9
 #: Two straight pieces are on one line within at least this angle (degrees): a sine above zero.
 _MIN_LINE_ANGLE_DEG = 1e-3
+#: A parabola is judged on at least this many vertices a side of a junction (3 fix one).
+_FIT_VERTICES = 3
+#: A piece's first vertices that may stand off the curve it continues: the hook a stray
+#: streak starts it with (two slices of 30 mm).
+_HOOK_VERTICES = 2
 
 
 def merge_duplicates(skels: list[Skeleton], pts: np.ndarray, p: PipeParams) -> list[Skeleton]:
@@ -66,26 +71,33 @@ def merge_fragments(skels: list[Skeleton], pts: np.ndarray, p: PipeParams) -> li
     ``merge_gap_m`` between them; two pieces merge end to start when the gap is at most
     ``merge_gap_m`` and the step from one to the other continues both directions (within
     ``merge_angle_deg``), or when their ends ran past each other along one curve
-    (:func:`_overlap`). The first such pair in x order is merged, then the search starts
-    again (the merged piece is shaped anew).
+    (:func:`_overlap`), or when their ends lie on one parabola (:func:`_on_one_curve`). The
+    first such pair in x order is merged, then the search starts again (the merged piece is
+    shaped anew).
     """
     while True:
         skels.sort(key=lambda k: float(k.xy[:, 0].min()))
-        pair = _first_mergeable(skels, p)
-        if pair is None:
+        found = _first_mergeable(skels, p)
+        if found is None:
             return skels
-        i, j = pair
-        skels[i] = union(skels[i], skels[j], pts, p)
+        i, j, b = found
+        skels[i] = union(skels[i], b, pts, p)
         skels.pop(j)
 
 
-def _first_mergeable(skels: list[Skeleton], p: PipeParams) -> tuple[int, int] | None:
+def _first_mergeable(skels: list[Skeleton], p: PipeParams) -> tuple[int, int, Skeleton] | None:
+    """The first pair (i, j) that merges, with ``skels[j]`` as it joins (its hook at the
+    junction left out, :func:`_on_one_curve`), or None."""
     cos_turn = math.cos(math.radians(p.merge_angle_deg))
     sin_line = math.sin(math.radians(max(p.horizontal_angle_deg, _MIN_LINE_ANGLE_DEG)))
     for i, a in enumerate(skels):
         for j in range(i + 1, len(skels)):
-            if _can_merge(a, skels[j], p, cos_turn, sin_line):
-                return i, j
+            b = skels[j]
+            if _can_merge(a, b, p, cos_turn, sin_line):
+                return i, j, b
+            trimmed = _on_one_curve(a, b, p)
+            if trimmed is not None:
+                return i, j, trimmed
     return None
 
 
@@ -135,6 +147,57 @@ def _overlap(a: Skeleton, b: Skeleton, p: PipeParams, cos_turn: float) -> bool:
     ea = end_direction(a.xy, p, end=True)
     sb = -end_direction(b.xy, p, end=False)
     return bool(ea @ sb >= cos_turn)
+
+
+def _on_one_curve(a: Skeleton, b: Skeleton, p: PipeParams) -> Skeleton | None:
+    """``b`` without its hook when ``a``'s end and ``b``'s start lie on one smooth curve across
+    the junction, else None.
+
+    The vertices of each piece within ``direction_window_m`` (in x) of the junction, ``b``'s
+    from past ``a``'s end, must lie within half of ``link_distance_m`` of one parabola y(x)
+    fitted to them all; up to ``_HOOK_VERTICES`` of ``b``'s first vertices may stand off it
+    and are left out of ``b``. A wave's chain broken at a trough turns 50-60° by the chord
+    directions of its two pieces, and a piece that a stray streak started beside a crest
+    begins with a hook 5 cm off the wave; neither passes the end-to-start test. Neither piece
+    horizontal or vertical, at least one curved, ``b`` starting within ``merge_gap_m`` of
+    ``a``'s end (in x and in distance).
+    """
+    if "curved" not in (a.kind, b.kind) or {a.kind, b.kind} & {"horizontal", "vertical"}:
+        return None
+    if a.chain is None or b.chain is None:
+        return None
+    if float(np.linalg.norm(b.xy[0] - a.xy[-1])) > p.merge_gap_m:
+        return None
+    x_end = float(a.xy[-1, 0])
+    if abs(float(b.xy[0, 0]) - x_end) > p.merge_gap_m:
+        return None
+    window = p.direction_window_m
+    tail = a.xy[a.xy[:, 0] >= x_end - window]
+    past = np.flatnonzero(b.xy[:, 0] > x_end)
+    if len(past) == 0:
+        return None
+    head = b.xy[past[0] :]
+    head = head[head[:, 0] <= head[0, 0] + window]
+    tolerance = 0.5 * p.link_distance_m
+    for skip in range(min(_HOOK_VERTICES, len(head) - _FIT_VERTICES) + 1):
+        used = head[skip:]
+        if len(tail) < _FIT_VERTICES or len(used) < _FIT_VERTICES:
+            return None
+        xy = np.vstack([tail, used])
+        if np.any(np.diff(xy[:, 0]) <= 0):  # not a curve y(x) across the junction
+            return None
+        fit = np.polynomial.Polynomial.fit(xy[:, 0], xy[:, 1], 2)
+        if np.abs(fit(xy[:, 0]) - xy[:, 1]).max() <= tolerance:
+            return _without_start(b, b.chain, float(used[0, 0]))
+    return None
+
+
+def _without_start(b: Skeleton, chain: Chain, x_from: float) -> Skeleton:
+    """``b`` (chained as ``chain``) with its centres and vertices before ``x_from`` (metres)
+    left out; its points stay."""
+    keep = chain.centres[:, 0] >= x_from - _TINY_GAP
+    kept = Chain(centres=chain.centres[keep], shared=chain.shared[keep], own=chain.own)
+    return Skeleton(xy=b.xy[b.xy[:, 0] >= x_from - _TINY_GAP], kind=b.kind, idx=b.idx, chain=kept)
 
 
 def merge_meetings(skels: list[Skeleton], p: PipeParams) -> list[Skeleton]:

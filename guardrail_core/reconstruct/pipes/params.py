@@ -168,9 +168,9 @@ class PipeParams(StageParams):
         8,
         ge=3,
         doc="Fewest points a short vertical candidate must hold a slice interval in from both "
-        "its ends, where the pipes across them do not reach (its drift is measured on them). "
-        "A king post of a far or short run holds 9-13 there; the pipe as a whole still needs "
-        "min_points.",
+        "its ends, where the pipes across them do not reach (its drift is measured on them), "
+        "and fewest it must keep once those pipes took theirs (min_points for every other "
+        "pipe). A king post of a far or short run holds 9-13 there.",
     )
     short_drift_m: float = param(
         0.015,
