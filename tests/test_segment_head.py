@@ -247,3 +247,24 @@ def test_a_wider_clip_leaves_the_shape_more_to_decide() -> None:
     for narrow, wide in itertools.pairwise(decided):
         assert np.all(wide[narrow])  # what the shape decided, it still decides
     assert decided[0].sum() < decided[2].sum() < decided[4].sum()
+
+
+def test_hiding_shape_features_in_training_lets_the_crop_speak_for_an_unseen_design() -> None:
+    """A head trained on streets without the thrie beam, asked about a street of it alone
+    (tests/data/README.md): trained on every feature, its shape features overrule a sure crop
+    on one thrie segment in seven; trained with half of them hidden at random, it follows the
+    crop on nearly all, and calls hardly more of the other segments guardrail."""
+    data = np.load(Path(__file__).parent / "data" / "thrie_left_out_dev9105.npz")
+    train = [data[f"train_{k}"].astype(np.float32) for k in ("features", "crop_proba")]
+    features = data["test_features"].astype(np.float32)
+    crop, thrie = data["test_crop_proba"].astype(np.float64), data["test_labels"]
+    sure = thrie & (crop > 0.9)  # thrie segments whose crop says guardrail
+    followed, false_alarms = {}, {}
+    for dropout in (0.0, 0.5):
+        params = SegmentHeadParams(epochs=300, feature_dropout=dropout)
+        called = fit_segment_head(*train, data["train_labels"], params).proba(features, crop)
+        followed[dropout] = (called[sure] >= 0.5).mean()
+        false_alarms[dropout] = (called[~thrie] >= 0.5).mean()
+    assert sure.sum() >= 500
+    assert followed[0.0] <= 0.93 and followed[0.5] >= 0.97
+    assert false_alarms[0.5] <= false_alarms[0.0] + 0.015

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -50,6 +51,14 @@ def add_parser(subparsers: common.Subparsers) -> None:
         "'intensity_mean,intensity_std' for a model meant for scanners whose intensity is "
         "calibrated otherwise than the training drives' (default: it reads them all)",
     )
+    own.add_argument(
+        "--feature-dropout",
+        type=float,
+        default=None,
+        metavar="SHARE",
+        help="share of the shape features hidden from each segment at each step of the segment "
+        "head's training, so that no shape vetoes what the crop says (default 0.5; 0: none)",
+    )
     parser = subparsers.add_parser(
         "train",
         help="train the guardrail classifier on labelled drives or on operators' labels",
@@ -76,6 +85,8 @@ def run(args: argparse.Namespace) -> int:
 
     params = ClassifierParams(mode=args.mode, seed=args.seed)
     head = SegmentHeadParams(ignored_features=args.ignore_features)
+    if args.feature_dropout is not None:
+        head = dataclasses.replace(head, feature_dropout=args.feature_dropout)
     if bool(args.drives) == bool(args.run):
         from guardrail_core.errors import InvalidOptionError
 

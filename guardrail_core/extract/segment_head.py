@@ -53,6 +53,17 @@ class SegmentHeadParams(StageParams):
         doc="the training crops are split into this many folds of whole spatial blocks; each "
         "fold's crop logits come from a crop classifier trained on the other folds",
     )
+    feature_dropout: float = param(
+        0.5,
+        ge=0,
+        lt=1,
+        doc="share of the shape and neighbour features hidden from each segment at each "
+        "training step, drawn anew each step (a hidden feature reads as its training mean; the "
+        "crop logit and has-crop are never hidden). Without it the head learns to veto any crop "
+        "by the shape alone: trained without the thrie beam, it called 601 of the 696 thrie "
+        "segments other whatever their crop said (leave-one-design-out F 0.09, 0.65 with 0.5). "
+        "0 trains on every feature",
+    )
     ignored_features: str = param(
         "",
         doc="segment features the head does not read, comma-separated (the model lists those "
@@ -351,9 +362,18 @@ def fit_segment_head(
         optimiser = torch.optim.AdamW(
             [w1, b1, w2, b2], lr=params.lr, weight_decay=params.weight_decay
         )
+        n_shape = z.shape[1] - 2  # the last two inputs, the crop logit and has-crop, stay
+        # The features hidden are drawn on their own generator, the same for every member and
+        # whatever the members' initial draws took.
+        hiding = torch.Generator().manual_seed(seed)
         for _ in range(params.epochs):
             optimiser.zero_grad()
-            hidden = torch.relu(torch.addmm(b1, z, w1.T)).view(len(z), k, h)
+            seen = z
+            if params.feature_dropout > 0:
+                draw = torch.rand(len(z), n_shape, generator=hiding)
+                kept = (draw >= params.feature_dropout).to(z.dtype)
+                seen = torch.cat([z[:, :n_shape] * kept, z[:, n_shape:]], dim=1)
+            hidden = torch.relu(torch.addmm(b1, seen, w1.T)).view(len(z), k, h)
             logits = torch.einsum("skh,kch->skc", hidden, w2) + b2  # (S, k, 2)
             # Each member's weighted mean loss, summed over the members.
             loss = (each(logits.permute(0, 2, 1), target[:, None].expand(-1, k)) * w[:, None]).sum()
