@@ -11,6 +11,8 @@ import numpy as np
 import pytest
 
 from guardrail_core.cli import main
+from guardrail_core.errors import InvalidOptionError
+from guardrail_core.extract.segment_head import SegmentHeadParams
 from tests.drive_files import tile_file
 from tests.file_tree import file_tree
 
@@ -132,6 +134,30 @@ def test_train_refuses_an_unknown_feature_to_ignore(
     assert main([*args, "--ignore-features", "intensity_mean,colour"]) == 2
     err = capsys.readouterr().err
     assert "ParameterError" in err and "ignored_features" in err and "colour" in err
+    assert not model.exists()
+
+
+def test_train_passes_the_feature_dropout_to_the_segment_head(
+    drive_path: Path,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    model = tmp_path / "model"
+    args = ["train", str(drive_path), "--out", str(model), "--quiet"]
+    assert main([*args, "--feature-dropout", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "ParameterError" in err and "feature_dropout" in err
+    heads = []
+
+    def captured(*drives: object, head: object, **kwargs: object) -> None:
+        heads.append(head)
+        raise InvalidOptionError("stopped before training")
+
+    monkeypatch.setattr("guardrail_core.extract.training.train_from_drives", captured)
+    assert main([*args, "--feature-dropout", "0.3"]) == 2
+    assert main(args) == 2
+    assert [h.feature_dropout for h in heads] == [0.3, SegmentHeadParams().feature_dropout]
     assert not model.exists()
 
 

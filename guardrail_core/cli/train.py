@@ -57,7 +57,8 @@ def add_parser(subparsers: common.Subparsers) -> None:
         default=None,
         metavar="SHARE",
         help="share of the shape features hidden from each segment at each step of the segment "
-        "head's training, so that no shape vetoes what the crop says (default 0.5; 0: none)",
+        "head's training, so that a shape it never saw does not veto what the crop says; it "
+        "trades precision on the training designs for recall on others (default 0: none)",
     )
     parser = subparsers.add_parser(
         "train",
