@@ -63,7 +63,7 @@ class SegmentHeadParams(StageParams):
         "by a shape it never saw; hidden ones teach it to hear the crop. It trades precision "
         "on the designs it was trained on for recall on those it was not (README, leave one "
         "design out): 0.1 took a development street's thrie beam, left out of training, from F "
-        "0.80 to 0.95 for 0.001 of F on the fourteen development streets; 0.5 lost 0.009 there",
+        "0.80 to 0.95 for 0.002 of F on the fourteen development streets; 0.5 lost 0.009 there",
     )
     ignored_features: str = param(
         "",
