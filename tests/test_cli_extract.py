@@ -159,6 +159,12 @@ def test_train_passes_the_feature_dropout_to_the_segment_head(
     assert main(args) == 2
     assert [h.feature_dropout for h in heads] == [0.3, SegmentHeadParams().feature_dropout]
     assert not model.exists()
+    capsys.readouterr()
+    with pytest.raises(SystemExit):
+        main(["train", "--help"])
+    # The help names the default the params hold (it is written out so that --help needs no torch).
+    help_text = " ".join(capsys.readouterr().out.split())
+    assert f"(default {SegmentHeadParams().feature_dropout:g}" in help_text
 
 
 def test_train_refuses_an_output_holding_its_drive_before_training(

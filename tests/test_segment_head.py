@@ -152,14 +152,17 @@ def test_weighted_labels_outvote_many_others() -> None:
 def test_members_are_separate_trainings_whose_logits_are_averaged() -> None:
     """A head of k members is one network k x hidden_units wide: member m's hidden units are
     block m, and the output averages the members' logits. Member 0 starts from the draw a
-    one-member head of the same seed starts from and is trained as it is, so it ends the same."""
+    one-member head of the same seed starts from and is trained as it is, so it ends the same.
+    No features are hidden here: the sums over the segments run in another order in a wider
+    network, and hidden features can let 300 steps grow that rounding past the tolerance."""
     rng = np.random.default_rng(4)
     features, crop, labels = synthetic(2000, rng)
-    one = fit_segment_head(features, crop, labels, QUICK, seed=5).weights("")
+    quick = dataclasses.replace(QUICK, feature_dropout=0.0)
+    one = fit_segment_head(features, crop, labels, quick, seed=5).weights("")
     three = fit_segment_head(
-        features, crop, labels, dataclasses.replace(QUICK, members=3), seed=5
+        features, crop, labels, dataclasses.replace(quick, members=3), seed=5
     ).weights("")
-    h = QUICK.hidden_units
+    h = quick.hidden_units
     assert three["net.0.weight"].shape == (3 * h, 5) and three["net.2.weight"].shape == (2, 3 * h)
     np.testing.assert_allclose(three["net.0.weight"][:h], one["net.0.weight"], atol=1e-4)
     np.testing.assert_allclose(three["net.0.bias"][:h], one["net.0.bias"], atol=1e-4)
