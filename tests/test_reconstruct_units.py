@@ -123,6 +123,34 @@ def test_the_spacing_is_the_gap_most_gaps_are_multiples_of():
     assert run_spacing(np.array([8.0, 8.0]), 0.08) == pytest.approx(8.0)  # every other missed
 
 
+def test_a_gap_shorter_than_any_railing_spacing_is_never_the_spacing():
+    # A W-beam run of a development street: two stems of a hedge behind it passed for posts,
+    # 1.01 m apart; 1.01 m divides the posts' 2 m gaps, so it won, and every 2 m gap got a
+    # virtual pole in its middle.
+    gaps = np.array([2.0, 2.0, 1.76, 1.63, 1.01, 1.67, 2.0, 4.0, 2.0])
+    assert run_spacing(gaps, 0.08) == pytest.approx(1.01)
+    assert run_spacing(gaps, 0.08, UnitParams().min_spacing_m) == pytest.approx(2.0)
+    assert run_spacing(np.array([0.9, 1.1]), 0.08, 1.5) == 0.0  # no spacing at all
+
+
+def test_false_poles_a_metre_apart_put_no_pole_in_the_run_gaps():
+    run = make_run(6, seed=12)
+    poles = order_poles(_poles(run), run.toward_road)
+    start, step = poles[2].position, poles[3].position - poles[2].position
+    # Two hedge stems between posts 2 and 3, 0.45 and 1.45 m along, and posts 4 and 5 missed.
+    stems = [Pole(start + t * step, run.pole_radius, 0.8, 30) for t in (0.225, 0.725)]
+    kept = [*poles[:3], *stems, poles[3], poles[6]]
+    split = split_units(run.xyz, kept)
+    # The 4 m gap between posts 3 and 6 takes the two posts missed there, and no other.
+    assert split.virtual.sum() == 2
+    virtual = np.array([p.position for p, v in zip(split.poles, split.virtual, strict=True) if v])
+    off = np.linalg.norm(run.poles[None, :, :2] - virtual[:, None, :2], axis=2).min(axis=1)
+    assert off.max() < 0.01
+    # With no floor the stems' 1 m gap is the spacing: a virtual pole in every 2 m gap.
+    split = split_units(run.xyz, kept, UnitParams(min_spacing_m=0.0))
+    assert split.virtual.sum() > 2
+
+
 def test_an_end_pole_off_the_spacing_is_no_post():
     run = make_run(3, spacing=4.0, seed=10)
     poles = order_poles(_poles(run), run.toward_road)

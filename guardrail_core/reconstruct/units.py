@@ -85,6 +85,18 @@ class UnitParams(StageParams):
         doc="A gap longer than this many times the run's spacing (see ``spacing_tolerance``) "
         "has missing poles: round(gap / spacing) - 1 virtual poles are inserted in it.",
     )
+    min_spacing_m: float = param(
+        1.5,
+        unit="m",
+        ge=0,
+        le=10.0,
+        doc="A run's spacing is at least this: posts stand 2 m or 4 m apart (real railings 1.5 m "
+        "and more), so a shorter gap is a false pole's, never the spacing. Two stems of a hedge "
+        "behind a W-beam that pass for posts some 1 m apart made 1 m the spacing, every 2 m "
+        "gap between real posts then took a virtual pole in its middle, and one run carried "
+        "ten poles that were not there. A run whose gaps are all shorter has no spacing: no "
+        "pole is inserted, dropped or added beyond its ends.",
+    )
     spacing_tolerance: float = param(
         0.08,
         gt=0,
@@ -233,13 +245,14 @@ def _whole_multiples(gaps: np.ndarray, spacing: float, tolerance: float) -> np.n
     return np.abs(gaps - k * spacing) <= tolerance * spacing
 
 
-def run_spacing(gaps: np.ndarray, tolerance: float) -> float:
+def run_spacing(gaps: np.ndarray, tolerance: float, min_spacing: float = 0.0) -> float:
     """The spacing (m) of a run's poles from the gaps (G,) between consecutive ones, G >= 1: the
-    gap that the most gaps are whole multiples of (within ``tolerance`` of it), the shortest of
-    those on a tie. A missed pole makes a gap of two spacings and a false one two odd gaps, so
-    the median, which most gaps being single spacings made right, fails with few gaps."""
+    gap of at least ``min_spacing`` (m) that the most gaps are whole multiples of (within
+    ``tolerance`` of it), the shortest of those on a tie; 0.0 when no gap is that long. A
+    missed pole makes a gap of two spacings and a false one two odd gaps, so the median, which
+    most gaps being single spacings made right, fails with few gaps."""
     gaps = np.asarray(gaps, np.float64)
-    candidates = np.sort(gaps[gaps > 0])
+    candidates = np.sort(gaps[(gaps > 0) & (gaps >= min_spacing)])
     if len(candidates) == 0:
         return 0.0
     support = [int(_whole_multiples(gaps, c, tolerance).sum()) for c in candidates]
@@ -252,7 +265,9 @@ def _drop_off_grid_ends(poles: list[Pole], params: UnitParams) -> tuple[list[Pol
     if len(poles) < 3:
         return list(poles), []
     gaps = _gaps(poles)
-    spacing = run_spacing(gaps, params.spacing_tolerance)
+    spacing = run_spacing(gaps, params.spacing_tolerance, params.min_spacing_m)
+    if spacing <= 0:
+        return list(poles), []
     fits = _whole_multiples(gaps, spacing, params.spacing_tolerance)
     first = 0 if fits[0] else 1
     last = len(poles) - (0 if fits[-1] else 1)
@@ -274,7 +289,9 @@ def _fill_missing(
         return list(poles), np.zeros(len(poles), bool), []
     pos = np.array([p.position for p in poles])
     gap = _gaps(poles)
-    spacing = run_spacing(gap, params.spacing_tolerance)
+    spacing = run_spacing(gap, params.spacing_tolerance, params.min_spacing_m)
+    if spacing <= 0:
+        return list(poles), np.zeros(len(poles), bool), []
     out: list[Pole] = [poles[0]]
     virtual = [False]
     notes = []
@@ -397,7 +414,7 @@ def _extend_ends(
     if params.min_extension_points <= 0 or len(poles) < 2 or len(rails) == 0:
         return list(poles), 0, 0
     pos = np.array([p.position for p in poles], np.float64)
-    spacing = run_spacing(_gaps(poles), params.spacing_tolerance)
+    spacing = run_spacing(_gaps(poles), params.spacing_tolerance, params.min_spacing_m)
     if spacing <= 0:
         return list(poles), 0, 0
     radius = float(np.median([p.radius for p in poles]))

@@ -100,16 +100,16 @@ class PoleParams(StageParams):
         "ground, balusters and stays stop at the lowest rail, 0.15-0.25 m above it.",
     )
     foot_gap_m: float = param(
-        0.08,
+        0.1,
         unit="m",
         ge=0,
         le=1.0,
         doc="Road points on a stack's footprint continue it downward while each lies at most this "
         "far below the one above: seen from across the road, a pole's lowest 0.15 m is taken "
         "for road (its normals tilt up), yet it still reaches the ground. The scan lines cross "
-        "a pole on the verge some 0.07 m apart, and the step from the road-labelled foot up to "
-        "the stack is one of them. A baluster's stack ends on the lowest rail, its underside "
-        "0.12 m or more above the ground points under it.",
+        "a pole on the verge some 0.07-0.09 m apart, and the step from the road-labelled foot "
+        "up to the stack is one of them. A baluster's stack ends on the lowest rail, its "
+        "underside 0.12 m or more above the ground points under it.",
     )
     min_radius_m: float = param(
         0.02,
