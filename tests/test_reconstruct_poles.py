@@ -151,6 +151,21 @@ def test_a_stump_shorter_than_any_guardrail_is_not_a_pole():
     assert len(detect_poles(xyz, run.ground, low).poles) == len(run.poles) + 1
 
 
+def test_a_hedge_stem_under_a_beam_is_shorter_than_any_post():
+    # Development street 622: under a W-beam, the stems of the hedge behind it were seen
+    # 0.30-0.36 m tall (the beam hides the rest), 7 cm wide, and stood as posts.
+    run = make_run(3, seed=13)
+    rng = np.random.default_rng(13)
+    middle = (run.poles[1] + run.poles[2]) / 2
+    stem = _front_cylinder(rng, middle + 0.3 * run.toward_road, run.toward_road, 0.07, 0.35)
+    xyz = np.vstack([run.xyz, stem])
+    anywhere = PoleParams(max_offset_deviation_m=1.0)  # this test is about the height alone
+    xy_err, _ = _match(detect_poles(xyz, run.ground, anywhere), run.poles)
+    assert xy_err.max() < POSITION_TOL
+    before = dataclasses.replace(anywhere, min_height_m=0.3)
+    assert len(detect_poles(xyz, run.ground, before).poles) == len(run.poles) + 1
+
+
 def test_a_post_off_the_line_of_the_poles_is_not_one_of_them():
     # A delineator post standing 0.45 m before the rails, 0.8 m from a pole.
     run = make_run(4, seed=12)

@@ -122,12 +122,15 @@ class PoleParams(StageParams):
         0.09, unit="m", gt=0, le=0.5, doc="Largest accepted pole radius (data: 70 mm)."
     )
     min_height_m: float = param(
-        0.3,
+        0.45,
         unit="m",
         ge=0,
         le=10.0,
         doc="A pole stands at least this tall above the ground (the lowest guardrail, a W-beam's "
-        "post, stands 0.6 m); shorter stacks are clutter at the run's foot.",
+        "post, stands 0.6 m, and a post reaches up to the rails it carries); shorter stacks are "
+        "clutter at the run's foot: the stems of a hedge under a W-beam, 0.30-0.36 m tall where "
+        "the beam hides the rest, passed 0.3 m as posts (12 of the 13 poles under 0.45 m "
+        "detected on the fourteen development streets stood where no pole was).",
     )
     max_height_m: float = param(
         1.6,
