@@ -137,33 +137,26 @@ def _front_cylinder(rng, base, toward_road, radius, height, n=120, noise=0.003):
     return base + r[:, None] * ring + rng.uniform(0, height, n)[:, None] * [0.0, 0.0, 1.0]
 
 
-def test_a_stump_shorter_than_any_guardrail_is_not_a_pole():
-    run = make_run(3, seed=11)
-    rng = np.random.default_rng(11)
+@pytest.mark.parametrize(
+    ("seed", "radius", "height", "passes_at"),
+    [
+        (11, 0.05, 0.25, 0.2),  # a stump at the run's foot
+        # Development street 622: under a W-beam, the stems of the hedge behind it were seen
+        # 0.30-0.36 m tall (the beam hides the rest), 7 cm wide, and stood as posts at 0.3 m.
+        (13, 0.07, 0.35, 0.3),
+    ],
+)
+def test_a_stack_shorter_than_any_post_is_not_a_pole(seed, radius, height, passes_at):
+    run = make_run(3, seed=seed)
+    rng = np.random.default_rng(seed)
     middle = (run.poles[1] + run.poles[2]) / 2
-    stump = _front_cylinder(rng, middle + 0.3 * run.toward_road, run.toward_road, 0.05, 0.25)
-    xyz = np.vstack([run.xyz, stump])
+    stack = _front_cylinder(rng, middle + 0.3 * run.toward_road, run.toward_road, radius, height)
+    xyz = np.vstack([run.xyz, stack])
     anywhere = PoleParams(max_offset_deviation_m=1.0)  # this test is about the height alone
-    det = detect_poles(xyz, run.ground, anywhere)
-    xy_err, _ = _match(det, run.poles)  # the 4 true poles, not the stump
+    xy_err, _ = _match(detect_poles(xyz, run.ground, anywhere), run.poles)  # the 4 true poles
     assert xy_err.max() < POSITION_TOL
-    low = dataclasses.replace(anywhere, min_height_m=0.2)
-    assert len(detect_poles(xyz, run.ground, low).poles) == len(run.poles) + 1
-
-
-def test_a_hedge_stem_under_a_beam_is_shorter_than_any_post():
-    # Development street 622: under a W-beam, the stems of the hedge behind it were seen
-    # 0.30-0.36 m tall (the beam hides the rest), 7 cm wide, and stood as posts.
-    run = make_run(3, seed=13)
-    rng = np.random.default_rng(13)
-    middle = (run.poles[1] + run.poles[2]) / 2
-    stem = _front_cylinder(rng, middle + 0.3 * run.toward_road, run.toward_road, 0.07, 0.35)
-    xyz = np.vstack([run.xyz, stem])
-    anywhere = PoleParams(max_offset_deviation_m=1.0)  # this test is about the height alone
-    xy_err, _ = _match(detect_poles(xyz, run.ground, anywhere), run.poles)
-    assert xy_err.max() < POSITION_TOL
-    before = dataclasses.replace(anywhere, min_height_m=0.3)
-    assert len(detect_poles(xyz, run.ground, before).poles) == len(run.poles) + 1
+    lower = dataclasses.replace(anywhere, min_height_m=passes_at)
+    assert len(detect_poles(xyz, run.ground, lower).poles) == len(run.poles) + 1
 
 
 def test_a_post_off_the_line_of_the_poles_is_not_one_of_them():
