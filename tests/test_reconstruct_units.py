@@ -146,9 +146,10 @@ def test_false_poles_a_metre_apart_put_no_pole_in_the_run_gaps():
     virtual = np.array([p.position for p, v in zip(split.poles, split.virtual, strict=True) if v])
     off = np.linalg.norm(run.poles[None, :, :2] - virtual[:, None, :2], axis=2).min(axis=1)
     assert off.max() < 0.01
-    # With no floor the stems' 1 m gap is the spacing: a virtual pole in every 2 m gap.
+    # With no floor the stems' 1 m gap is the spacing: a virtual pole in each 2 m gap and five
+    # in the 6 m one.
     split = split_units(run.xyz, kept, UnitParams(min_spacing_m=0.0))
-    assert split.virtual.sum() > 2
+    assert split.virtual.sum() == 1 + 1 + 5
 
 
 def test_an_end_pole_off_the_spacing_is_no_post():
