@@ -13,7 +13,12 @@ from pathlib import Path
 from typing import Any
 
 from guardrail_core.extract.classify import GuardrailClassifier
-from guardrail_core.extract.model_folder import MODEL_FILE, load_model, save_model
+from guardrail_core.extract.model_folder import (
+    DEFAULT_MODEL_DIR,
+    MODEL_FILE,
+    load_model,
+    save_model,
+)
 from guardrail_core.formats.run_folder import Run
 
 
@@ -81,6 +86,29 @@ class ModelRegistry:
     def add(self, model: GuardrailClassifier) -> Path:
         """Save a fine-tuned model as ``folder/<version>``."""
         return save_model(model, self.folder / model.version)
+
+    def fine_tuning_start(self) -> GuardrailClassifier | None:
+        """The model a fine-tuning starts from: the one the active model was itself fine-tuned
+        from, else the active model, so that every fine-tuning starts from the model that made
+        the run, with every label given so far (a chain of fine-tunings on a model's own
+        labels drifts); None where its folder is not known. The shipped default model is known
+        whether the run names its folder or not."""
+        version = self.active_version
+        folder = self._folder_of(version)
+        if folder is not None:
+            origin = _read_info(folder).get("trained_on", {}).get("segment_head_from")
+            if origin:
+                version, folder = origin, self._folder_of(origin)
+        return None if folder is None else load_model(folder)
+
+    def _folder_of(self, version: str) -> Path | None:
+        folders = self._folders()
+        if version in folders:
+            return folders[version]
+        shipped = DEFAULT_MODEL_DIR / MODEL_FILE
+        if shipped.is_file() and _read_info(DEFAULT_MODEL_DIR)["version"] == version:
+            return DEFAULT_MODEL_DIR
+        return None
 
     def load(self, version: str) -> GuardrailClassifier:
         """The model of that version.

@@ -21,12 +21,15 @@ Report = Callable[[float, str], None]
 def fine_tune(
     session: ReviewSession, *, mode: str = "fast", include_unreviewed: bool = True
 ) -> Callable[[Report], dict[str, Any]]:
-    """A job that trains a model from the store's labels and saves it (not activated)."""
+    """A job that trains a model from the store's labels and saves it (not activated): the model
+    that made the run fine-tuned (:meth:`~app.model_registry.ModelRegistry.fine_tuning_start`),
+    or, where its folder is not known, a new one."""
     operator_label = session.operator_label.copy()  # a snapshot: labelling goes on meanwhile
     run = session.run
 
     def work(report: Report) -> dict[str, Any]:
         report(0.0, "collecting labels")
+        start = session.models.fine_tuning_start()
         trained = train_from_run(
             run,
             operator_label=operator_label,
@@ -34,6 +37,7 @@ def fine_tune(
             include_unreviewed=include_unreviewed,
             progress_fn=lambda f, m: report(0.95 * f, m),
             drive_root=session.drive.root,
+            start_from=start,
         )
         report(0.96, "saving the model")
         session.models.add(trained.model)

@@ -22,7 +22,8 @@ count of ``--labels``:
 After each batch it fine-tunes exactly as the app's "Train" and "Activate" do
 (:func:`~guardrail_core.review.training.train_from_run` in fast mode on the reviewed labels and
 the run's corrected labels elsewhere, but for those an operator contradicted on their component
-(``--keep-contradicted`` keeps them), then :func:`~guardrail_core.review.training.predict_run`
+(``--keep-contradicted`` keeps them), its segment head fine-tuned from MODEL's (``--fresh-head``
+draws it anew, as before 2026-11-29), then :func:`~guardrail_core.review.training.predict_run`
 and :func:`~guardrail_core.review.training.write_predictions`), and measures guardrail F (after
 label correction) on the rest of the street: every segment the oracle has not labelled yet,
 counted per segment (``guardrail_f1``) and per point (``guardrail_f1_points``: a segment weighs
@@ -51,7 +52,8 @@ sys.path.insert(0, str(ROOT))
 from guardrail_core.distributed import ClusterSpec  # noqa: E402
 from guardrail_core.evaluate.detection import detection_metrics  # noqa: E402
 from guardrail_core.extract.classify import ClassifierParams  # noqa: E402
-from guardrail_core.extract.model_folder import DEFAULT_MODEL_DIR  # noqa: E402
+from guardrail_core.extract.crop_classifier import GuardrailClassifier  # noqa: E402
+from guardrail_core.extract.model_folder import DEFAULT_MODEL_DIR, load_model  # noqa: E402
 from guardrail_core.extract.segment_truth import segment_truth  # noqa: E402
 from guardrail_core.formats.drive import open_drive  # noqa: E402
 from guardrail_core.formats.run_folder import load_run  # noqa: E402
@@ -96,8 +98,13 @@ def learning_curve(
     reviewed_weight: float | None = None,
     leave_out_contradicted: bool = True,
     train_seed: int = 0,
+    model: GuardrailClassifier | None = None,
 ) -> dict:
-    """Label, fine-tune and measure ``run_dir`` (modified in place) at each count of ``labels``."""
+    """Label, fine-tune and measure ``run_dir`` (modified in place) at each count of ``labels``.
+
+    ``model`` made the run: every fine-tuning starts from it, with every label given so far,
+    as the app's Train does; None: every one from fresh draws.
+    """
     rng = np.random.default_rng(seed)
     run = load_run(run_dir)
     random_order = rng.permutation(len(run))
@@ -129,6 +136,7 @@ def learning_curve(
                 params=ClassifierParams(mode="fast", seed=train_seed),
                 reviewed_weight=reviewed_weight,
                 leave_out_contradicted=leave_out_contradicted,
+                start_from=model,
             )
             write_predictions(run_dir, predict_run(run, trained.model), trained.model)
             run = load_run(run_dir)
@@ -174,6 +182,12 @@ def main() -> int:
         help="train on the model's labels an operator contradicted on their component too "
         "(as before 2026-11-28; see contradicted_labels in guardrail_core/review/training.py)",
     )
+    parser.add_argument(
+        "--fresh-head",
+        action="store_true",
+        help="train each segment head from fresh draws instead of fine-tuning the run's model's "
+        "(as before 2026-11-29)",
+    )
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     labels = sorted({int(x) for x in args.labels.split(",")})
@@ -205,6 +219,7 @@ def main() -> int:
                 args.reviewed_weight,
                 leave_out_contradicted=not args.keep_contradicted,
                 train_seed=args.train_seed,
+                model=None if args.fresh_head else load_model(args.model),
             )
     if args.json:
         print(json.dumps(out, indent=1))

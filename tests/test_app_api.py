@@ -288,6 +288,9 @@ def test_fine_tune_then_activate(client: TestClient, session: ReviewSession) -> 
     assert new is not None and cur is not None
     assert new["n_held_out"] == cur["n_held_out"] == result["held_out_segments"] > 0
     assert result["current_version"] == current
+    # The active model was fine-tuned, not replaced by one taught by this run alone.
+    trained_on = session.models.load(result["version"]).info["trained_on"]
+    assert trained_on["segment_head_from"] == current
 
     models = client.get("/api/models").json()
     versions = {m["version"]: m for m in models["models"]}
@@ -303,6 +306,14 @@ def test_fine_tune_then_activate(client: TestClient, session: ReviewSession) -> 
     rows = client.get("/api/segments", params={"reviewed": True, "limit": 100}).json()["items"]
     assert sorted(row["id"] for row in rows) == guardrail
     assert all(row["label"] == "guardrail" for row in rows)
+    # Trained again with the fine-tuned model active: it starts from the model that made the run
+    # again, with every label so far, not from the fine-tuned one.
+    again = client.jobs.wait(  # type: ignore[attr-defined]
+        client.post("/api/train", json={"mode": "fast"}).json()["job"], timeout=300
+    )
+    assert again.status == "done", again.error
+    second = client.get(f"/api/jobs/{again.id}").json()["result"]["version"]
+    assert session.models.load(second).info["trained_on"]["segment_head_from"] == current
     # And the model that made the run can be activated again (its folder was given).
     assert client.post(f"/api/models/{current}/activate", json={}).json()["active"] == current
 
@@ -344,8 +355,18 @@ def test_guardrail_train_takes_the_store_labels(
     assert "operator-labelled points" in capsys.readouterr().out
     trained_on = load_model(out).info["trained_on"]
     assert "operator labels" in json.dumps(trained_on)
+    assert trained_on["segment_head_from"] is None
+    # Fine-tuning the model that made the run.
+    made = session.models.fine_tuning_start()
+    assert made is not None and made.version == session.run.info.model.version
+    tuned = tmp_path / "tuned"
+    start = ["--start-from", str(session.models.run_model_dir)]
+    assert main(["train", "--run", run, "--labels", str(store), "--out", str(tuned), *start]) == 0
+    assert load_model(tuned).info["trained_on"]["segment_head_from"] == made.version
     # Drives and --run together, or a store that is not there, are named errors.
     assert main(["train", "x", "--run", run, "--out", str(tmp_path / "m2")]) == 2
+    assert main(["train", "x", *start, "--out", str(tmp_path / "m2")]) == 2
+    assert "--start-from" in capsys.readouterr().err
     missing = ["train", "--run", run, "--labels", str(tmp_path / "nope.sqlite"), "--out", "m3"]
     assert main(missing) == 2
     assert "LabelStoreError" in capsys.readouterr().err

@@ -381,6 +381,30 @@ def test_a_segment_head_can_leave_the_intensities_unread(run_path: Path) -> None
         SegmentHeadParams(ignored_features="intensity_mean,colour")
 
 
+def test_fine_tuning_starts_from_the_given_models_segment_head(run_path: Path) -> None:
+    run = load_run(run_path)
+    nobody = np.full(len(run.point_segment), -1, np.int8)
+    data = training_set_from_run(run, nobody)
+    shape = SegmentHeadParams(members=2, hidden_units=16, ignored_features="intensity_mean")
+    start = train_on_set(data, params=ClassifierParams(mode="fast"), head=shape).model
+    # One step at a tiny rate: the fine-tuned head is its start's, whatever shape `head` asks.
+    still = SegmentHeadParams(fine_tune_epochs=1, lr=1e-9)
+    labels = _flip_some(run)[0]
+    tuned = train_from_run(run, labels, head=still, start_from=start).model
+    assert tuned.info["trained_on"]["segment_head_from"] == start.version
+    assert tuned.info["segment_head"]["features"] == start.info["segment_head"]["features"]
+    assert tuned.info["segment_head"]["params"]["members"] == 2
+    crop = np.full(len(data.features), 0.7)
+    np.testing.assert_allclose(
+        tuned.segment_proba(data.features, crop),
+        start.segment_proba(data.features, crop),
+        atol=1e-5,
+    )
+    fresh = train_from_run(run, labels, head=still).model
+    assert fresh.info["trained_on"]["segment_head_from"] is None
+    assert len(fresh.info["segment_head"]["features"]) == len(SEGMENT_FEATURE_NAMES)
+
+
 def test_train_from_run_on_one_class_of_operator_labels_is_refused(run_path: Path) -> None:
     run = load_run(run_path)
     guardrail = np.flatnonzero(run.segments["label"])[:5]

@@ -19,6 +19,7 @@ from guardrail_core.extract.segment_head import (
     average_of_members,
     fit_segment_head,
     head_inputs,
+    members_of,
 )
 from guardrail_core.extract.shape_features import SEGMENT_FEATURE_DIM, SEGMENT_FEATURE_NAMES
 
@@ -271,3 +272,56 @@ def test_hiding_shape_features_in_training_lets_the_crop_speak_for_an_unseen_des
     assert sure.sum() >= 500
     assert followed[0.0] <= 0.93 and followed[0.5] >= 0.97
     assert false_alarms[0.5] <= false_alarms[0.0] + 0.015
+
+
+def test_members_of_an_average_are_members_that_average_to_it() -> None:
+    generator = torch.Generator().manual_seed(1)
+    w1, b1 = torch.randn(3 * 4, 5, generator=generator), torch.randn(3 * 4, generator=generator)
+    w2, b2 = torch.randn(3, 2, 4, generator=generator), torch.randn(3, 2, generator=generator)
+    net = average_of_members(w1, b1, w2, b2)
+    x = torch.randn(7, 5, generator=generator)
+    again = average_of_members(*members_of(net, 3))
+    torch.testing.assert_close(again(x), net(x))
+    with pytest.raises(InvalidOptionError, match="not 5 members"):
+        members_of(net, 5)
+
+
+def test_a_fine_tuned_head_keeps_what_its_start_learnt_where_the_new_labels_are_silent() -> None:
+    """The start learnt feature 0 > 0. The new labels cover only feature 0 > 0.5 and teach an
+    exception there (feature 1 > 2 is other): fine-tuned, the head learns the exception and
+    still calls feature 0 < -1 other; a head trained on the new labels alone has nothing there
+    to go by, and calls it by feature 1 as the exception taught it."""
+    rng = np.random.default_rng(3)
+    params = dataclasses.replace(QUICK, fine_tune_epochs=100)
+    old = rng.normal(scale=[2.0, 1.0, 1.0], size=(3000, 3)).astype(np.float32)
+    start = fit_segment_head(old, np.full(len(old), np.nan), old[:, 0] > 0, params)
+    new = np.column_stack(
+        [rng.uniform(0.5, 3, 600), rng.uniform(-1, 4, 600), rng.normal(size=600)]
+    ).astype(np.float32)
+    new_labels = new[:, 1] <= 2
+    none = np.full(len(new), np.nan)
+    tuned = fit_segment_head(new, none, new_labels, params, start=start)
+    fresh = fit_segment_head(new, none, new_labels, params)
+    np.testing.assert_array_equal(tuned.mean, start.mean)  # the start's standardisation
+    silent = np.column_stack(
+        [rng.uniform(-3, -1, 300), rng.uniform(-1, 1.5, 300), rng.normal(size=300)]
+    ).astype(np.float32)
+    no_crop = np.full(len(silent), np.nan)
+    assert (tuned.proba(silent, no_crop) < 0.5).mean() >= 0.95
+    assert (fresh.proba(silent, no_crop) < 0.5).mean() <= 0.5
+    exception = new[:, 1] > 2.2
+    assert (tuned.proba(new, none)[exception] < 0.5).mean() >= 0.9
+
+
+def test_a_head_starts_only_from_a_head_of_its_own_shape() -> None:
+    rng = np.random.default_rng(5)
+    features, crop, labels = synthetic(500, rng)
+    start = fit_segment_head(features, crop, labels, QUICK)
+    # One step at a tiny rate: the new head answers as its start does.
+    still = dataclasses.replace(QUICK, fine_tune_epochs=1, lr=1e-9)
+    same = fit_segment_head(features, crop, labels, still, start=start)
+    np.testing.assert_allclose(same.proba(features, crop), start.proba(features, crop), atol=1e-5)
+    with pytest.raises(InvalidOptionError, match="units wide"):
+        fit_segment_head(features, crop, labels, dataclasses.replace(QUICK, members=2), start=start)
+    with pytest.raises(InvalidOptionError, match="reads 3 features"):
+        fit_segment_head(features[:, :2], crop, labels, QUICK, start=start)

@@ -29,6 +29,14 @@ def add_parser(subparsers: common.Subparsers) -> None:
         help="the label store (default: DRIVE/review/labels.sqlite of the run's drive)",
     )
     own.add_argument(
+        "--start-from",
+        type=Path,
+        metavar="MODEL_DIR",
+        help="with --run: fine-tune this model's segment head (the model that made the run: what "
+        "its training drives taught stays where the labels do not say otherwise) instead of "
+        "training a new one on the run alone",
+    )
+    own.add_argument(
         "--reviewed-only",
         action="store_true",
         help="with --run: only segments an operator labelled (default: the others keep the "
@@ -95,6 +103,10 @@ def run(args: argparse.Namespace) -> int:
             "give either DRIVE... (labels from their truth/) or --run RUN_DIR (labels from the "
             "review app's label store), not both or neither"
         )
+    if args.start_from is not None and not args.run:
+        from guardrail_core.errors import InvalidOptionError
+
+        raise InvalidOptionError("--start-from fine-tunes on a run's labels: give --run RUN_DIR")
     if args.run:
         model, inputs = _train_from_labels(args, params, head)
     else:
@@ -130,8 +142,18 @@ def _train_from_labels(
         labels = store.point_labels().copy()
     counts = int((labels >= 0).sum())
     print(f"{counts:,} operator-labelled points from {path}")
+    start = None
+    if args.start_from is not None:
+        from guardrail_core.extract.model_folder import load_model
+
+        start = load_model(args.start_from)
     model = train_from_run(
-        run, labels, params=params, head=head, include_unreviewed=not args.reviewed_only
+        run,
+        labels,
+        params=params,
+        head=head,
+        include_unreviewed=not args.reviewed_only,
+        start_from=start,
     ).model
     return model, inputs
 

@@ -24,7 +24,7 @@ from guardrail_core.extract.classifier_training import (
 from guardrail_core.extract.crop_classifier import GuardrailClassifier, model_version
 from guardrail_core.extract.crops import CROP_OK
 from guardrail_core.extract.pipeline import ExtractionParams, extract, segment_crops
-from guardrail_core.extract.segment_head import SegmentHeadParams, fit_segment_head
+from guardrail_core.extract.segment_head import SegmentHead, SegmentHeadParams, fit_segment_head
 from guardrail_core.extract.segment_truth import segment_truth
 from guardrail_core.formats.drive import load_drive
 
@@ -184,6 +184,7 @@ def train_on_set(
     progress: bool = False,
     progress_fn: Callable[[float, str], None] | None = None,
     trained_on: dict[str, Any] | None = None,
+    start_head: SegmentHead | None = None,
 ) -> SetTraining:
     """Train the crop classifier and the segment head on a training set.
 
@@ -208,6 +209,9 @@ def train_on_set(
         step (embedding, crop classifier, each fold, segment head) and with 1.0 at the end
     trained_on : description of the data stored in ``info["trained_on"]``; the counts
         ``segments``, ``crops``, ``guardrail`` and ``other`` are added
+    start_head : a trained segment head to fine-tune rather than draw a new one (see
+        :func:`~guardrail_core.extract.segment_head.fit_segment_head`); the crop classifier is
+        trained anew either way
 
     Returns
     -------
@@ -294,6 +298,7 @@ def train_on_set(
             seed=params.seed,
             columns=columns,
             sample_weight=None if data.weights is None else data.weights[~held],
+            start=start_head,
         )
         proba = measured.proba(data.features[held], crop_proba[held])
         # ">=" as the pipeline calls a segment guardrail (process_drive, predict_run).
@@ -316,6 +321,7 @@ def train_on_set(
         seed=params.seed,
         columns=columns,
         sample_weight=data.weights,
+        start=start_head,
     )
     info = model.info
     info["metrics"] = {"held_out": held_out, "held_out_crops": info["metrics"]["held_out"]}
