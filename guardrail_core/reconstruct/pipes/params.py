@@ -124,7 +124,9 @@ class PipeParams(StageParams):
         doc="The largest gap where vertical_gap_m finds no vertical pipe: a thin pipe gets one "
         "streak of points per scan line, and when every unit of a run was scanned at the same "
         "heights (the pole spacing a multiple of the vehicle's advance per scanner turn, 0.1 m "
-        "at 10 m/s) the superimposition does not fill the gaps between the streaks.",
+        "at 10 m/s) the superimposition does not fill the gaps between the streaks. Also how "
+        "far beside a short vertical's end (beyond its radius) the streaks of a pipe across "
+        "it are looked for.",
     )
     vertical_angle_deg: float = param(
         4.0,

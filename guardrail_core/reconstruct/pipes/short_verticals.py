@@ -2,8 +2,8 @@
 
 In the x histogram of all points a 0.15 m vertical barely rises above the rails; once the
 straight pipes' points are out, it stands out in the histogram of the rest. It is one where
-pipes run across both its ends: points on either side (:func:`crossed`), or a straight pipe
-found before it.
+pipes run across both its ends: points on either side (:func:`crossed`, looked for as far
+as one scan line's streak from the next), or a straight pipe found before it.
 """
 
 from __future__ import annotations
@@ -86,8 +86,13 @@ def short_verticals(
         if found is None:
             continue
         y0, y1, radius, drift = found
+        # The points of a pipe across an end come in streaks along x, one per scan line, as
+        # far apart as vertical_sparse_gap_m where every unit was scanned at the same places:
+        # an arch's crown under a king post may have none within crossing_reach, and, unlike
+        # a rail, no straight line to stand for it.
         if drift > p.short_drift_m or not all(
-            crossed(pts, centre, end, radius, p) or _line_across(lines, centre, end, p)
+            crossed(pts, centre, end, radius, p, reach=p.vertical_sparse_gap_m)
+            or _line_across(lines, centre, end, p)
             for end in (y0, y1)
         ):
             continue

@@ -105,13 +105,23 @@ def longest_chain(y: np.ndarray, gap: float) -> tuple[float, float]:
     return float(ys[starts[k]]), float(ys[ends[k]])
 
 
-def crossed(pts: np.ndarray, x: float, y: float, radius: float, p: PipeParams) -> bool:
+def crossed(
+    pts: np.ndarray,
+    x: float,
+    y: float,
+    radius: float,
+    p: PipeParams,
+    reach: float | None = None,
+) -> bool:
     """Whether a pipe runs across the end (x, y) of a vertical pipe of ``radius`` (metres): at
     least ``crossing_min_points`` of ``pts`` (N, 3) on either side, within ``slice_interval_m``
-    in y and from ``short_window_m`` to ``crossing_reach`` times it beyond the radius in x."""
+    in y and from ``short_window_m`` beyond the radius to ``reach`` beyond it in x (metres;
+    by default ``crossing_reach`` times ``short_window_m``)."""
+    if reach is None:
+        reach = p.crossing_reach * p.short_window_m
     near = np.abs(pts[:, 1] - y) <= p.slice_interval_m
     dx = pts[near, 0] - x
-    lo, hi = radius + p.short_window_m, radius + p.crossing_reach * p.short_window_m
+    lo, hi = radius + p.short_window_m, radius + reach
     left = int(((dx <= -lo) & (dx >= -hi)).sum())
     right = int(((dx >= lo) & (dx <= hi)).sum())
     return min(left, right) >= p.crossing_min_points
