@@ -8,18 +8,17 @@ its predictions into the run folder.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
 from guardrail_core.extract.classify import GuardrailClassifier
-from guardrail_core.extract.model_folder import (
-    DEFAULT_MODEL_DIR,
-    MODEL_FILE,
-    load_model,
-    save_model,
-)
+from guardrail_core.extract.model_folder import MODEL_FILE, load_model, save_model
 from guardrail_core.formats.run_folder import Run
+from guardrail_core.review.model_lineage import (
+    fine_tuned_models,
+    fine_tuning_start_folder,
+    model_info,
+)
 
 
 class UnknownModelError(KeyError):
@@ -48,11 +47,8 @@ class ModelRegistry:
     def _folders(self) -> dict[str, Path]:
         folders: dict[str, Path] = {}
         if self.run_model_dir is not None and (self.run_model_dir / MODEL_FILE).is_file():
-            folders[_read_info(self.run_model_dir)["version"]] = self.run_model_dir
-        if self.folder.is_dir():
-            for path in sorted(self.folder.iterdir()):
-                if (path / MODEL_FILE).is_file():
-                    folders[path.name] = path
+            folders[model_info(self.run_model_dir)["version"]] = self.run_model_dir
+        folders.update(fine_tuned_models(self.folder))
         return folders
 
     def list(self) -> list[dict[str, Any]]:
@@ -60,7 +56,7 @@ class ModelRegistry:
         rows = []
         folders = self._folders()
         for version, path in folders.items():
-            info = _read_info(path)
+            info = model_info(path)
             rows.append(_row(info, active=version == self.active_version))
         if self.active_version not in folders:  # made the run, folder not given
             rows.append(
@@ -92,23 +88,10 @@ class ModelRegistry:
         from, else the active model, so that every fine-tuning starts from the model that made
         the run, with every label given so far (a chain of fine-tunings on a model's own
         labels drifts); None where its folder is not known. The shipped default model is known
-        whether the run names its folder or not."""
-        version = self.active_version
-        folder = self._folder_of(version)
-        if folder is not None:
-            origin = _read_info(folder).get("trained_on", {}).get("segment_head_from")
-            if origin:
-                version, folder = origin, self._folder_of(origin)
+        whether the run names its folder or not
+        (:func:`guardrail_core.review.model_lineage.fine_tuning_start_folder`)."""
+        folder = fine_tuning_start_folder(self.active_version, self._folders())
         return None if folder is None else load_model(folder)
-
-    def _folder_of(self, version: str) -> Path | None:
-        folders = self._folders()
-        if version in folders:
-            return folders[version]
-        shipped = DEFAULT_MODEL_DIR / MODEL_FILE
-        if shipped.is_file() and _read_info(DEFAULT_MODEL_DIR)["version"] == version:
-            return DEFAULT_MODEL_DIR
-        return None
 
     def load(self, version: str) -> GuardrailClassifier:
         """The model of that version.
@@ -122,10 +105,6 @@ class ModelRegistry:
         if version not in folders:
             raise UnknownModelError(version)
         return load_model(folders[version])
-
-
-def _read_info(folder: Path) -> dict[str, Any]:
-    return json.loads((folder / MODEL_FILE).read_text(encoding="utf-8"))
 
 
 def _row(info: dict[str, Any], *, active: bool) -> dict[str, Any]:

@@ -30,12 +30,12 @@ from guardrail_core.formats.drive import DriveSource, open_drive
 from guardrail_core.formats.label_store import LABEL_GUARDRAIL, LABEL_OTHER, LabelChange, LabelStore
 from guardrail_core.formats.run_folder import Run
 from guardrail_core.formats.run_folder_paths import RunFolder
+from guardrail_core.review.model_lineage import FINE_TUNED_MODELS_DIR
 from guardrail_core.review.run_crops import RunCrops
 
 #: What the review app writes lives in this folder of the drive: labels outlive run folders.
 REVIEW_DIR = "review"
 LABELS_FILE = "labels.sqlite"
-MODELS_DIR = "models"
 
 LABEL_VALUES = {"other": LABEL_OTHER, "guardrail": LABEL_GUARDRAIL}
 
@@ -101,7 +101,7 @@ class ReviewSession:
         self.crops = RunCrops(self.run, self.drive.root, keep_images=CROP_IMAGES_KEPT)
         # The camera images with the points on them (the run's points never change).
         self.overlay = ImageOverlay(self.drive, self.tiles, self.crops.params)
-        self.models = ModelRegistry(self.review_dir / MODELS_DIR, self.run, model_dir)
+        self.models = ModelRegistry(self.review_dir / FINE_TUNED_MODELS_DIR, self.run, model_dir)
         self.operator_label = np.full(len(self.run), -1, np.int8)  # (S,) -1 unreviewed
         segments, label = self.tiles.operator_labels(*self.store.labelled())
         self.operator_label[segments] = label

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -351,8 +352,11 @@ def test_guardrail_train_takes_the_store_labels(
     store = session.store.path
     out = tmp_path / "model"
     run = str(session.run.root)
+    # The model that made the run is neither the shipped one nor one the app fine-tuned: the
+    # command says so and draws a new head.
     assert main(["train", "--run", run, "--labels", str(store), "--out", str(out)]) == 0
-    assert "operator-labelled points" in capsys.readouterr().out
+    said = capsys.readouterr().out
+    assert "operator-labelled points" in said and "not at hand" in said
     trained_on = load_model(out).info["trained_on"]
     assert "operator labels" in json.dumps(trained_on)
     assert trained_on["segment_head_from"] is None
@@ -363,10 +367,27 @@ def test_guardrail_train_takes_the_store_labels(
     start = ["--start-from", str(session.models.run_model_dir)]
     assert main(["train", "--run", run, "--labels", str(store), "--out", str(tuned), *start]) == 0
     assert load_model(tuned).info["trained_on"]["segment_head_from"] == made.version
+    # Next to the label store, where the app keeps its models, it is found without being named;
+    # --fresh-head draws a new head all the same.
+    kept = store.parent / "models" / made.version
+    shutil.copytree(session.models.run_model_dir, kept)
+    try:
+        found = tmp_path / "found"
+        assert main(["train", "--run", run, "--labels", str(store), "--out", str(found)]) == 0
+        assert f"fine-tuning the segment head of model {made.version}" in capsys.readouterr().out
+        assert load_model(found).info["trained_on"]["segment_head_from"] == made.version
+        fresh = ["--fresh-head", "--out", str(tmp_path / "fresh")]
+        assert main(["train", "--run", run, "--labels", str(store), *fresh]) == 0
+        assert load_model(tmp_path / "fresh").info["trained_on"]["segment_head_from"] is None
+    finally:
+        shutil.rmtree(kept)
     # Drives and --run together, or a store that is not there, are named errors.
     assert main(["train", "x", "--run", run, "--out", str(tmp_path / "m2")]) == 2
     assert main(["train", "x", *start, "--out", str(tmp_path / "m2")]) == 2
     assert "--start-from" in capsys.readouterr().err
+    both = ["train", "--run", run, *start, "--fresh-head", "--out", str(tmp_path / "m2")]
+    assert main(both) == 2
+    assert "not both" in capsys.readouterr().err
     missing = ["train", "--run", run, "--labels", str(tmp_path / "nope.sqlite"), "--out", "m3"]
     assert main(missing) == 2
     assert "LabelStoreError" in capsys.readouterr().err

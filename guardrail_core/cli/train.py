@@ -32,9 +32,15 @@ def add_parser(subparsers: common.Subparsers) -> None:
         "--start-from",
         type=Path,
         metavar="MODEL_DIR",
-        help="with --run: fine-tune this model's segment head (the model that made the run: what "
-        "its training drives taught stays where the labels do not say otherwise) instead of "
-        "training a new one on the run alone",
+        help="with --run: fine-tune this model's segment head (default: that of the model that "
+        "made the run, found by its version among the shipped default model and the models the "
+        "review app fine-tuned next to the label store; what its training drives taught stays "
+        "where the labels do not say otherwise)",
+    )
+    own.add_argument(
+        "--fresh-head",
+        action="store_true",
+        help="with --run: train a new segment head on the run alone instead of fine-tuning one",
     )
     own.add_argument(
         "--reviewed-only",
@@ -103,10 +109,16 @@ def run(args: argparse.Namespace) -> int:
             "give either DRIVE... (labels from their truth/) or --run RUN_DIR (labels from the "
             "review app's label store), not both or neither"
         )
-    if args.start_from is not None and not args.run:
+    if (args.start_from is not None or args.fresh_head) and not args.run:
         from guardrail_core.errors import InvalidOptionError
 
-        raise InvalidOptionError("--start-from fine-tunes on a run's labels: give --run RUN_DIR")
+        raise InvalidOptionError(
+            "--start-from and --fresh-head train on a run's labels: give --run RUN_DIR"
+        )
+    if args.start_from is not None and args.fresh_head:
+        from guardrail_core.errors import InvalidOptionError
+
+        raise InvalidOptionError("give --start-from MODEL_DIR or --fresh-head, not both")
     if args.run:
         model, inputs = _train_from_labels(args, params, head)
     else:
@@ -142,11 +154,7 @@ def _train_from_labels(
         labels = store.point_labels().copy()
     counts = int((labels >= 0).sum())
     print(f"{counts:,} operator-labelled points from {path}")
-    start = None
-    if args.start_from is not None:
-        from guardrail_core.extract.model_folder import load_model
-
-        start = load_model(args.start_from)
+    start = _start_model(args, run.info.model.version, Path(path).parent)
     model = train_from_run(
         run,
         labels,
@@ -156,6 +164,39 @@ def _train_from_labels(
         start_from=start,
     ).model
     return model, inputs
+
+
+def _start_model(
+    args: argparse.Namespace, run_model: str, review_dir: Path
+) -> GuardrailClassifier | None:
+    """The model whose segment head the training fine-tunes: ``--start-from``'s, else the one
+    the review app would start from (the model that made the run, found by its version among
+    the shipped default model and the models fine-tuned in ``review_dir``); None for a new
+    head (``--fresh-head``, or that model's folder not at hand, which is said)."""
+    from guardrail_core.extract.model_folder import load_model
+    from guardrail_core.review.model_lineage import (
+        FINE_TUNED_MODELS_DIR,
+        fine_tuned_models,
+        fine_tuning_start_folder,
+    )
+
+    if args.start_from is not None:
+        return load_model(args.start_from)
+    if args.fresh_head:
+        return None
+    folders = fine_tuned_models(review_dir / FINE_TUNED_MODELS_DIR)
+    folder = fine_tuning_start_folder(run_model, folders)
+    if folder is None:
+        print(
+            f"the run was predicted by model {run_model}, whose folder is not at hand: a new "
+            "segment head is drawn (give --start-from MODEL_DIR to fine-tune that model)"
+        )
+        return None
+    start = load_model(folder)
+    print(
+        f"fine-tuning the segment head of model {start.version} ({folder}); --fresh-head for a new one"
+    )
+    return start
 
 
 def held_out_report(info: dict) -> str:
