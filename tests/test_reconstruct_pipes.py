@@ -227,6 +227,23 @@ def _arch_king_post(rec, x_tol=0.005):
     return king
 
 
+def _arch_fixture(name):
+    data = np.load(Path(__file__).parent / "data" / name)
+    return reconstruct_pipes(
+        data["points"].astype(np.float64),
+        float(data["length"]),
+        float(data["pole_radius"]),
+        unit_of_point=data["unit"],
+    )
+
+
+def _along_arch(pipe, radius):
+    """Distances (metres) of a reconstructed axis, every 5 mm, from the design's arch of
+    ``radius`` (centre x = 1.0 m, y = 0.2 m)."""
+    xy = resample(pipe.axis[:, :2], 0.005)
+    return np.abs(np.hypot(xy[:, 0] - 1.0, xy[:, 1] - 0.2) - radius)
+
+
 @pytest.mark.parametrize("seed", range(6))
 def test_an_arch_king_post_is_found_from_few_units(seed):
     # The design pipe_arch from 8 superimposed units: a 0.15 m king post between the outer
@@ -399,14 +416,7 @@ def test_a_far_runs_king_post_under_the_histogram_threshold_is_found():
     # README.md): the arches' crowns lift the histogram around the king post above the
     # post's own peak, and 13 of its points stand clear of the rail and the arch. Standing
     # 0.12 m tall in its 3 cm window, it is a candidate, and holds enough points to be one.
-    data = np.load(Path(__file__).parent / "data" / "arch_far_king_post_dev702.npz")
-    rec = reconstruct_pipes(
-        data["points"].astype(np.float64),
-        float(data["length"]),
-        float(data["pole_radius"]),
-        unit_of_point=data["unit"],
-    )
-    post = _arch_king_post(rec, x_tol=0.01)
+    post = _arch_king_post(_arch_fixture("arch_far_king_post_dev702.npz"), x_tol=0.01)
     assert np.abs(np.sort(post.axis[:, 1]) - [0.75, 0.9]).max() < 0.02
 
 
@@ -450,23 +460,6 @@ def test_a_chain_holding_a_joining_pipes_points_is_measured_on_its_own():
     assert m.n_points >= 0.95 * len(pipe)
 
 
-def _arch_fixture(name):
-    data = np.load(Path(__file__).parent / "data" / name)
-    return reconstruct_pipes(
-        data["points"].astype(np.float64),
-        float(data["length"]),
-        float(data["pole_radius"]),
-        unit_of_point=data["unit"],
-    )
-
-
-def _along_arch(pipe, radius):
-    """Distances (metres) of a reconstructed axis, every 5 mm, from the design's arch of
-    ``radius`` (centre x = 1.0 m, y = 0.2 m)."""
-    xy = resample(pipe.axis[:, :2], 0.005)
-    return np.abs(np.hypot(xy[:, 0] - 1.0, xy[:, 1] - 0.2) - radius)
-
-
 def test_an_outer_arch_whose_chain_took_the_king_posts_points_stays_on_the_arch():
     # A pipe_arch run of 4 units on a development street (tests/data/README.md): the outer
     # arch's chain held the unfound king post's points at its crown; its radius was measured
@@ -494,13 +487,7 @@ def test_an_arch_chain_does_not_step_from_its_crown_to_a_lone_centre():
     # 0.12 m up to a centre no other joined (a polyline of one centre, taken as level), and on
     # from it along the top rail; its other half started at the crown. A lone centre has no
     # direction to continue, and the arch is one curve along its whole length.
-    data = np.load(Path(__file__).parent / "data" / "arch_sparse_king_post_dev708.npz")
-    rec = reconstruct_pipes(
-        data["points"].astype(np.float64),
-        float(data["length"]),
-        float(data["pole_radius"]),
-        unit_of_point=data["unit"],
-    )
+    rec = _arch_fixture("arch_sparse_king_post_dev708.npz")
     curves = [q for q in rec.pipes if q.kind == "curved"]
     assert len(curves) == 2
     for arch, radius in zip(curves, (0.55, 0.35), strict=True):
