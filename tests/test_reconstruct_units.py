@@ -8,7 +8,7 @@ import pytest
 from guardrail_core.errors import ReconstructionError
 from guardrail_core.reconstruct.model import Pole
 from guardrail_core.reconstruct.poles import detect_poles
-from guardrail_core.reconstruct.runs import RunParams, group_runs
+from guardrail_core.reconstruct.runs import RunParams, _closest_voxels, group_runs
 from guardrail_core.reconstruct.units import (
     UnitParams,
     order_poles,
@@ -42,6 +42,45 @@ def test_group_runs_drops_short_groups_and_checks_input():
         group_runs(np.array([[0.0, np.inf, 0.0]]))
     with pytest.raises(ReconstructionError, match="shape"):
         group_runs(np.zeros((4, 2)))
+
+
+def test_a_run_one_slice_cut_in_two_is_one_run_but_not_with_a_guardrail_of_other_heights():
+    # A slice called other (0.5 m: a shrub against the rails) cut a guardrail in two: its
+    # pieces stand on one line with the same heights, and are one run again.
+    xyz = make_run(4, seed=6).xyz
+    cut = xyz[(xyz[:, 0] < 14.2) | (xyz[:, 0] > 14.7)]
+    assert np.unique(group_runs(cut)).tolist() == [0]
+    assert np.unique(group_runs(cut, RunParams(bridge_m=0.0))).tolist() == [0, 1]
+    # A railing 0.2 m higher beyond the same gap after the guardrail's end (an arch fence
+    # after a W-beam) stays a run of its own, and so does one 0.5 m beside the line.
+    higher = make_run(2, rails=(0.6, 0.95), pole_height=1.0, seed=7).xyz + [8.5, 0.0, 0.16]
+    beside = make_run(2, seed=8).xyz + [8.5, 0.5, 0.16]
+    for other in (higher, beside):
+        run = group_runs(np.concatenate([xyz, other]))
+        assert np.unique(run[: len(xyz)]).tolist() == [0]
+        assert np.unique(run[len(xyz) :]).tolist() == [1]
+    # Without the gap cut, the same railing beyond it is the guardrail's continuation.
+    same = make_run(2, seed=9).xyz + [8.5, 0.0, 0.16]
+    assert np.unique(group_runs(np.concatenate([xyz, same]))).tolist() == [0]
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_closest_voxels_of_two_runs_are_those_every_pair_of_voxels_gives(seed):
+    # The bridge looks for each pair of components' closest voxels in cells of its reach, not
+    # among every pair of voxels within it (4 GB for 2.8 million points): the same pairs.
+    rng = np.random.default_rng(seed)
+    centroids = rng.uniform(0.0, 6.0, (400, 3)) * [1.0, 1.0, 0.3]
+    comp = rng.integers(0, 12, 400)
+    reach = 0.8
+    got = _closest_voxels(centroids, comp, reach)
+    d = np.linalg.norm(centroids[:, None] - centroids[None], axis=2)
+    expected = {}
+    for a, b in zip(*np.nonzero((d <= reach) & (comp[:, None] < comp[None])), strict=True):
+        pair = (int(comp[a]), int(comp[b]))
+        if pair not in expected or d[a, b] < d[expected[pair]]:
+            expected[pair] = (int(a), int(b))
+    assert got == [expected[pair] for pair in sorted(expected)]
+    assert len(got) > 20
 
 
 @pytest.mark.parametrize("arc", [None, 20.0])

@@ -4,6 +4,7 @@ evaluation against the truth, and the bad cases of whole runs."""
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import shutil
 from pathlib import Path
@@ -27,6 +28,7 @@ from guardrail_core.reconstruct.pipeline import (
 )
 from guardrail_core.reconstruct.poles import PoleParams
 from guardrail_core.reconstruct.run_models import load_run_models
+from guardrail_core.reconstruct.units import UnitParams
 from tests.file_tree import file_tree
 from tests.reconstruct_fixtures import make_run
 
@@ -254,6 +256,24 @@ def test_units_beyond_the_seen_poles_take_the_model_but_do_not_shape_it() -> Non
     assert row["units"] == 6 and row["units_superimposed"] == 3
     assert row["pole_count"] == 7 and row["poles_seen"] == 4
     assert "beyond the end poles" in row["notes"]
+
+
+def test_a_unit_with_a_hole_takes_the_model_but_does_not_shape_it() -> None:
+    # A slice of unit 2 called other (a shrub against its rails, which strays in the unit's
+    # other slices): 0.5 m of it holds no point. The model comes from the whole units.
+    synth = make_run(n_units=4, seed=9)
+    x = synth.xyz[:, 0]
+    hole = (x > 14.7) & (x < 15.2) & ~synth.is_pole
+    holed = dataclasses.replace(synth, xyz=synth.xyz[~hole], is_pole=synth.is_pole[~hole])
+    run, superimposed = _reconstruct(holed)
+    assert superimposed is not None and run.model is not None
+    assert set(np.unique(superimposed.unit_of_point).tolist()) == {0, 1, 3}
+    assert run.model.n_units == 3 and not run.registered[2]
+    assert any("without points between the poles" in note for note in run.notes)
+    # Allowed a longer hole, every unit shapes it.
+    wide = ReconstructionParams(units=UnitParams(max_hole_m=1.0))
+    run, superimposed = _reconstruct(holed, params=wide)
+    assert superimposed is not None and run.model is not None and run.model.n_units == 4
 
 
 def test_rails_without_poles_are_not_reconstructed_and_the_inventory_says_why() -> None:

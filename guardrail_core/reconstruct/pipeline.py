@@ -261,13 +261,27 @@ def reconstruct_run(
     unit_points = [frames[u].to_unit(rails[split.unit_of_point == u]) for u in range(len(frames))]
     unit_points = [p[p[:, 1] >= params.units.ground_clearance_m] for p in unit_points]
     # Units beyond the detected end poles take the model but do not shape it: their x is
-    # only extrapolated (unless no unit is anchored at all).
+    # only extrapolated (unless no unit is anchored at all); nor do units with a hole (unless
+    # none is whole).
     chosen = np.flatnonzero(split.anchored) if split.anchored.any() else np.arange(len(frames))
+    pole_radius = float(np.median([p.radius for p in poles]))
+    margin = pole_radius + params.pipes.pole_margin_m
+    whole = [
+        u
+        for u in chosen
+        if largest_hole(unit_points[u][:, 0], margin, frames[u].length - margin)
+        < params.units.max_hole_m
+    ]
+    if whole and len(whole) < len(chosen):
+        notes.append(
+            f"{len(chosen) - len(whole)} unit(s) with {params.units.max_hole_m:g} m or more "
+            "without points between the poles took the model without shaping it"
+        )
+        chosen = np.asarray(whole, dtype=np.int64)
     if max_units is not None:
         chosen = chosen[:max_units]
     used = [unit_points[u] for u in chosen]
     length = float(np.median([f.length for f in frames]))
-    pole_radius = float(np.median([p.radius for p in poles]))
     if length <= 2 * (pole_radius + params.pipes.pole_margin_m):
         # Two "poles" closer than their own width and margins (stems in a bush beside a rail):
         # there is no unit between them to model.
@@ -304,6 +318,15 @@ def reconstruct_run(
         unit_of_point=superimposed.unit_of_point,
     )
     return RunModel(run_id, poles, frames, model, registered, len(xyz), notes), superimposed
+
+
+def largest_hole(x: np.ndarray, x0: float, x1: float) -> float:
+    """Metres: the longest stretch of [``x0``, ``x1``] (metres along a unit) that no value of
+    ``x`` (K,) falls in (the whole stretch without points; 0 when it is empty)."""
+    if x1 <= x0:
+        return 0.0
+    inside = np.sort(x[(x > x0) & (x < x1)])
+    return float(np.diff(np.concatenate([[x0], inside, [x1]])).max())
 
 
 @dataclass(frozen=True)

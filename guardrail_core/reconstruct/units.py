@@ -79,6 +79,15 @@ class UnitParams(StageParams):
         "guardrail (no rail runs that low), not the unit shape (negative: points below the "
         "ground line are kept down to this).",
     )
+    max_hole_m: float = param(
+        0.4,
+        unit="m",
+        gt=0,
+        doc="A unit whose points leave a stretch of x this long empty between its poles (a "
+        "slice called other cut it, or something hid it) takes the model but does not shape "
+        "it, unless no unit is whole: what made the slice look other, a shrub against the "
+        "rails, leaves its strays in the unit.",
+    )
     missing_pole_ratio: float = param(
         1.6,
         gt=1,
