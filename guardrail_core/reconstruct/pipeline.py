@@ -269,7 +269,7 @@ def reconstruct_run(
     whole = [
         u
         for u in chosen
-        if largest_hole(unit_points[u][:, 0], margin, frames[u].length - margin)
+        if _largest_hole(unit_points[u][:, 0], margin, frames[u].length - margin)
         < params.units.max_hole_m
     ]
     if whole and len(whole) < len(chosen):
@@ -320,9 +320,9 @@ def reconstruct_run(
     return RunModel(run_id, poles, frames, model, registered, len(xyz), notes), superimposed
 
 
-def largest_hole(x: np.ndarray, x0: float, x1: float) -> float:
+def _largest_hole(x: np.ndarray, x0: float, x1: float) -> float:
     """Metres: the longest stretch of [``x0``, ``x1``] (metres along a unit) that no value of
-    ``x`` (K,) falls in (the whole stretch without points; 0 when it is empty)."""
+    ``x`` (K,) falls in: all of it when none does, 0 when ``x1 <= x0``."""
     if x1 <= x0:
         return 0.0
     inside = np.sort(x[(x > x0) & (x < x1)])
