@@ -19,6 +19,7 @@ from guardrail_core.extract.crops import (
     choose_images,
     cut_crops,
 )
+from guardrail_core.extract.curbs import separate_curbs
 from guardrail_core.extract.lattice import build_lattice
 from guardrail_core.extract.road import OFF_ROAD, ROAD, RoadParams, remove_road
 from guardrail_core.extract.segment_scores import ClassifyParams
@@ -158,6 +159,15 @@ def slice_drive(
         kept = status == 0
     with timer.stage("components", points=int(kept.sum())):
         component = wireframe_components(points.xyz, kept, lattice, params.segments)
+        component = separate_curbs(
+            points.xyz,
+            component,
+            lattice,
+            track.station,
+            track.lateral,
+            track.height,
+            params.segments,
+        )
         component = absorb_fragments(points.xyz, component, params.segments, track.height)
     with timer.stage("slices", points=int(kept.sum())):
         segments = slice_components(

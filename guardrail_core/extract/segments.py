@@ -17,7 +17,7 @@ from guardrail_core.extract.lattice import Lattice, neighbour_at
 from guardrail_core.params import StageParams, param
 
 #: Sums of bin widths that should equal a length differ from it by rounding only.
-_ROUNDING_M = 1e-9
+ROUNDING_M = 1e-9
 
 
 @dataclass(frozen=True)
@@ -206,6 +206,71 @@ class SegmentParams(StageParams):
         doc="a slice is cut behind its front (front_layer_m) only where what lies behind holds "
         "at least this many times the points of the front: a hedge is bigger than the rail it "
         "backs, while a deep beam's back half and its post hold fewer points than its face",
+    )
+    curb_gap_m: float = param(
+        0.15,
+        unit="m",
+        ge=0,
+        le=10,
+        doc="a slice (or piece) is also cut under an empty band at least this tall across it "
+        "where what lies below is a curb's: no higher than curb_top_m, in front of all that "
+        "stands above the band, spanning curb_min_length_m along the slice and holding "
+        "curb_min_points. A rail set just behind a curb is joined to it by its posts, and "
+        "where no post is in the slice the rail and the curb are one segment of two objects "
+        "with nothing between them (a W-beam's plate starts 0.4 m above the curb); the part "
+        "below becomes a component of its own. 0 turns this off. A pipe guardrail's bottom rail "
+        "lies under its top rail, not in front of it, and a slice holding a post has no band",
+    )
+    curb_top_m: float = param(
+        0.3,
+        unit="m",
+        ge=0,
+        le=10,
+        doc="what curb_gap_m cuts off lies wholly at most this far above the road (a curb is "
+        "0.1-0.2 m tall)",
+    )
+    curb_min_length_m: float = param(
+        0.25,
+        unit="m",
+        ge=0,
+        le=100,
+        doc="what curb_gap_m cuts off spans at least this much along the trajectory (from a "
+        "tenth to nine tenths of its points): a curb runs through the slice",
+    )
+    curb_max_width_m: float = param(
+        0.3,
+        unit="m",
+        ge=0,
+        le=10,
+        doc="what curb_gap_m and curb_front_m take as curb spans at most this much across the "
+        "trajectory in its slice (from a tenth to nine tenths of its points): a curb's face and "
+        "top do, 0.1-0.25 m with the road's edge before it; grass and the ground before a "
+        "fence spread wider (a fence cut from them looked like a rail to the classifier)",
+    )
+    curb_max_rise_m: float = param(
+        0.25,
+        unit="m",
+        ge=0,
+        le=10,
+        doc="what curb_gap_m and curb_front_m take as curb rises at most this much in its slice "
+        "(from a tenth to nine tenths of its points): a curb's face is 0.1-0.2 m tall; the "
+        "ground before a fence on an embankment's slope or a ditch's rises more",
+    )
+    curb_front_m: float = param(
+        0.03,
+        unit="m",
+        ge=0,
+        le=10,
+        doc="in the slices of a component with a curb cut by curb_gap_m, what lies no higher "
+        "than curb_top_m and at least this much in front of nine tenths of what stands higher "
+        "is curb too: the curb where a post fills the band (the post's foot stands behind the "
+        "rail's face, a pipe rail's bottom rail in its plane), and the curb between two rails",
+    )
+    curb_min_points: int = param(
+        5,
+        ge=1,
+        le=1_000_000,
+        doc="what curb_gap_m cuts off holds at least this many points",
     )
 
 
@@ -512,7 +577,7 @@ def _lateral_pieces(
         return np.cumsum(start) - 1
 
     run = runs(valley)
-    valley &= np.bincount(run)[run] * params.width_bin_m >= params.min_valley_m - _ROUNDING_M
+    valley &= np.bincount(run)[run] * params.width_bin_m >= params.min_valley_m - ROUNDING_M
     run = runs(valley)
     piece[members] = (run - run[first_bin[owner]])[cell]
     return piece
@@ -572,7 +637,7 @@ def _gap_pieces(
     # Runs between gaps (and slice ends), contiguous in this order, and how wide each spans.
     starts = np.flatnonzero(step | first)
     ends = np.append(starts[1:], len(order)) - 1
-    wide = across[ends] - across[starts] >= params.gap_piece_m - _ROUNDING_M
+    wide = across[ends] - across[starts] >= params.gap_piece_m - ROUNDING_M
     run = np.cumsum(step | first) - 1
     # A gap starts run r: it cuts when run r or run r - 1 is wide.
     cut = step.copy()
@@ -606,12 +671,11 @@ def _behind_front(
     if len(segment) == 0:
         return behind
     n_seg = int(segment.max()) + 1
-    side = np.where(np.bincount(segment, weights=lateral, minlength=n_seg) < 0, -1.0, 1.0)
-    depth = lateral * side[segment]  # metres from the trajectory on the slice's side
+    depth = depth_from_path(segment, lateral, n_seg)
     low, high = _lateral_bounds(segment, depth)
     # Only slices deep enough to hold a front layer and a mass behind it are binned.
     deep_m = params.front_layer_m + params.front_behind_min_width_m
-    deep = np.flatnonzero(high - low >= deep_m - _ROUNDING_M)
+    deep = np.flatnonzero(high - low >= deep_m - ROUNDING_M)
     if len(deep) == 0:
         return behind
     _, _, members, cell, counts, owner = _bins_across(
@@ -625,7 +689,7 @@ def _behind_front(
     nearest = np.full(n_seg, np.iinfo(np.int64).max)
     np.minimum.at(nearest, s[dense[cell]], cell[dense[cell]])
     mine = np.flatnonzero(cell == nearest[s])
-    (front,) = _group_shares(s[mine], d[mine], (params.valley_share,), n_seg, np.inf)
+    (front,) = group_shares(s[mine], d[mine], (params.valley_share,), n_seg, np.inf)
     back = d - front[s] >= params.front_layer_m
     # The nearest point behind each slice's front layer, and how many lie behind and before.
     back_low = np.full(n_seg, np.inf)
@@ -638,27 +702,35 @@ def _behind_front(
     np.maximum.at(top, s[~back], front_height)
     np.minimum.at(bottom, s[~back], front_height)
     cut = (
-        (high - back_low >= params.front_behind_min_width_m - _ROUNDING_M)
+        (high - back_low >= params.front_behind_min_width_m - ROUNDING_M)
         & (n_back >= params.front_behind_ratio * n_front)
         & (n_front >= params.front_min_points)
         & (top - bottom >= params.front_min_height_m)
     )
     # How far what lies behind spans along the trajectory, its tails left out (a stray point
     # does not stretch it).
-    first, last = _group_shares(
-        s[back], station[members][back], (_SPAN_TAIL, 1 - _SPAN_TAIL), n_seg, 0.0
+    first, last = group_shares(
+        s[back], station[members][back], (SPAN_TAIL, 1 - SPAN_TAIL), n_seg, 0.0
     )
-    cut &= last - first >= params.front_behind_min_length_m - _ROUNDING_M
+    cut &= last - first >= params.front_behind_min_length_m - ROUNDING_M
     behind[members] = back & cut[s]
     return behind
 
 
 #: Share of the points behind a slice's front left out at either end of their span along the
 #: trajectory.
-_SPAN_TAIL = 0.1
+SPAN_TAIL = 0.1
 
 
-def _group_shares(
+def depth_from_path(segment: np.ndarray, lateral: np.ndarray, n_seg: int) -> np.ndarray:
+    """(K,) metres from the trajectory on each slice's side: ``lateral`` (K,) (metres left of
+    the trajectory) negated in the slices ``segment`` (K,) of ``n_seg`` whose points lie right
+    of it on the whole."""
+    side = np.where(np.bincount(segment, weights=lateral, minlength=n_seg) < 0, -1.0, 1.0)
+    return lateral * side[segment]
+
+
+def group_shares(
     group: np.ndarray,
     value: np.ndarray,
     shares: tuple[float, ...],
