@@ -16,7 +16,8 @@ For each design D (default: every shipped design), with d its index among the sh
 It prints guardrail and other F (after label correction) on each test street. Target (issue
 21): guardrail F >= 0.95 for every design. Seeds 8001-8099 are this benchmark's; drives and
 models are made once under ``--data`` and reused (a model whose segment head was trained with
-other parameters is trained again). About 6 minutes per design on 2 cores.
+other parameters, or whose training segments were cut with other extraction parameters, is
+trained again). About 6 minutes per design on 2 cores.
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ from guardrail_core.distributed import ClusterSpec  # noqa: E402
 from guardrail_core.evaluate.detection import evaluate_run_folder  # noqa: E402
 from guardrail_core.extract.classify import ClassifierParams  # noqa: E402
 from guardrail_core.extract.model_folder import save_model  # noqa: E402
+from guardrail_core.extract.pipeline import ExtractionParams  # noqa: E402
 from guardrail_core.extract.segment_head import SegmentHeadParams  # noqa: E402
 from guardrail_core.extract.training import train_from_drives  # noqa: E402
 from guardrail_core.process import process_drive_folder  # noqa: E402
@@ -54,10 +56,19 @@ def street(out: Path, seed: int, length: float, designs: list[str]) -> Path:
     return out
 
 
+#: Next to a model: the extraction parameters its training drives' segments were cut with.
+EXTRACTION_FILE = "lodo_extraction.json"
+
+
 def trained_with(model_dir: Path, head: SegmentHeadParams) -> bool:
-    """Whether the model in ``model_dir`` has a segment head trained with ``head``."""
+    """Whether the model in ``model_dir`` has a segment head trained with ``head``, on segments
+    cut with today's extraction parameters (a model from before :data:`EXTRACTION_FILE` was
+    written is trained again: its segments may have been cut otherwise)."""
     path = model_dir / "model.json"
-    if not path.is_file():
+    extraction = model_dir / EXTRACTION_FILE
+    if not path.is_file() or not extraction.is_file():
+        return False
+    if json.loads(extraction.read_text()) != ExtractionParams().to_json():
         return False
     saved = json.loads(path.read_text()).get("segment_head", {}).get("params", {})
     saved.setdefault("feature_dropout", 0.0)  # models from before it was a parameter had none
@@ -76,6 +87,7 @@ def leave_out(design: str, index: int, data: Path, workers: int, head: SegmentHe
         print(f"training without {design} ...", file=sys.stderr, flush=True)
         model = train_from_drives(train, params=ClassifierParams(mode="fast"), head=head)
         save_model(model, model_dir, overwrite=True)
+        (model_dir / EXTRACTION_FILE).write_text(json.dumps(ExtractionParams().to_json()))
     run = folder / "run"
     if run.exists():
         shutil.rmtree(run)
