@@ -212,14 +212,16 @@ class SegmentParams(StageParams):
         unit="m",
         ge=0,
         le=10,
-        doc="a slice (or piece) is also cut under an empty band at least this tall across it "
-        "where what lies below is a curb's: no higher than curb_top_m, in front of all that "
-        "stands above the band, spanning curb_min_length_m along the slice and holding "
-        "curb_min_points. A rail set just behind a curb is joined to it by its posts, and "
-        "where no post is in the slice the rail and the curb are one segment of two objects "
-        "with nothing between them (a W-beam's plate starts 0.4 m above the curb); the part "
-        "below becomes a component of its own. 0 turns this off. A pipe guardrail's bottom rail "
-        "lies under its top rail, not in front of it, and a slice holding a post has no band",
+        doc="a component's 0.5 m slice holds a curb under an empty band at least this tall "
+        "across it where what lies below is a curb's: no higher than curb_top_m, in front of "
+        "all that stands above the band, spanning curb_min_length_m along the slice and holding "
+        "curb_min_points, curb-shaped (curb_max_width_m, curb_max_rise_m). A rail set just "
+        "behind a curb is joined to it by its posts, and where no post is in the slice the "
+        "rail and the curb are one segment of two objects with nothing between them (a "
+        "W-beam's plate starts 0.4 m above the curb). That curb, and the rest of it "
+        "(curb_front_m), are linked apart from the rest of the component "
+        "(guardrail_core/extract/curbs.py). 0 turns this off. A pipe guardrail's bottom rail "
+        "lies under its top rail, not in front of it",
     )
     curb_top_m: float = param(
         0.3,
