@@ -64,9 +64,8 @@ def curb_points(
     n_components = int(component[kept].max()) + 1
     keys, segment = np.unique(slices * n_components + component[kept], return_inverse=True)
     up = np.asarray(height, np.float64)[kept]
-    below = _under_a_band(
-        segment, np.asarray(lateral, np.float64)[kept], up, np.asarray(station)[kept], params
-    )
+    across = np.asarray(lateral, np.float64)[kept]
+    below = _under_a_band(segment, across, up, np.asarray(station)[kept], params)
     if not below.any():
         return curb
     n_seg = len(keys)
@@ -74,7 +73,6 @@ def curb_points(
     # In those components' slices, what lies low in front of all above it: the curb where a
     # post fills the band (the post's foot stands behind the rail's face), and the curb alone
     # between two rails (nothing above it).
-    across = np.asarray(lateral, np.float64)[kept]
     depth = depth_from_path(segment, across, n_seg)
     high = up > params.curb_top_m
     (front,) = group_shares(segment[high], depth[high], (SPAN_TAIL,), n_seg, np.inf)
