@@ -1,0 +1,121 @@
+"""The leave-one-design-out benchmark's training pool (``benchmarks/accuracy_lodo.py``): every
+design is left out of as many streets, and a street's cut segments are kept and reused only
+while they were cut with today's parameters."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from guardrail_core.extract.backbone import EMBEDDING_DIM
+from guardrail_core.extract.training import TrainingSet
+from guardrail_core.synth.designs import list_designs
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def lodo():  # type: ignore[no-untyped-def]
+    spec = importlib.util.spec_from_file_location(
+        "accuracy_lodo", ROOT / "benchmarks" / "accuracy_lodo.py"
+    )
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules["accuracy_lodo"] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.parametrize("draw", [1, 2, 9])
+def test_each_design_misses_one_street_of_every_pair(lodo, draw: int) -> None:  # type: ignore[no-untyped-def]
+    shipped = list_designs()
+    streets = [lodo.pool_designs(draw, j, shipped) for j in range(2 * lodo.POOL_PAIRS)]
+    for first, second in zip(streets[::2], streets[1::2], strict=True):
+        assert sorted(first + second) == sorted(shipped)  # the pair splits the designs
+        assert abs(len(first) - len(second)) <= 1
+    for design in shipped:
+        assert sum(design not in s for s in streets) == lodo.POOL_PAIRS
+    # Pairs are drawn apart: not every pair splits the designs alike.
+    assert len({tuple(s) for s in streets[::2]}) > 1
+    seeds = [lodo.pool_seed(draw, j) for j in range(2 * lodo.POOL_PAIRS)]
+    assert all(8001 <= s <= 8999 for s in seeds) and len(set(seeds)) == len(seeds)
+    other = {lodo.pool_seed(draw % 9 + 1, j) for j in range(2 * lodo.POOL_PAIRS)}
+    assert not other & set(seeds)
+
+
+def _set(n: int, crops: list[int], group: int) -> TrainingSet:
+    has_crop = np.zeros(n, bool)
+    has_crop[crops] = True
+    return TrainingSet(
+        features=np.full((n, 3), float(group), np.float32),
+        labels=np.arange(n) % 2 == 0,
+        groups=np.full(n, group, np.int64),
+        has_crop=has_crop,
+        crops=None,
+        sources=[{"drive": f"d{group}"}],
+        embeddings=np.full((len(crops), EMBEDDING_DIM), float(group), np.float32),
+    )
+
+
+def test_joined_sets_keep_their_blocks_apart_and_embeddings_in_crop_order(lodo) -> None:  # type: ignore[no-untyped-def]
+    joined = lodo.joined([_set(4, [1, 3], 0), _set(3, [0], 0)])
+    assert joined.groups.tolist() == [0, 0, 0, 0, 1_000_000, 1_000_000, 1_000_000]
+    assert np.flatnonzero(joined.has_crop).tolist() == [1, 3, 4]
+    assert joined.embeddings is not None and joined.embeddings.shape == (3, EMBEDDING_DIM)
+    assert joined.embeddings[:, 0].tolist() == [0.0, 0.0, 0.0]
+    assert joined.features.shape == (7, 3) and joined.sources == [{"drive": "d0"}, {"drive": "d0"}]
+
+
+def test_a_street_is_cut_once_and_again_when_cut_otherwise(
+    lodo,  # type: ignore[no-untyped-def]
+    drive_path: Path,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    street = tmp_path / "street_8101"
+    street.symlink_to(drive_path, target_is_directory=True)
+    cuts: list[Path] = []
+    cut = lodo.labelled_segments
+
+    def counted(paths, size):  # type: ignore[no-untyped-def]
+        cuts.extend(paths)
+        return cut(paths, size)
+
+    monkeypatch.setattr(lodo, "labelled_segments", counted)
+    first = lodo.street_set(street, 128)
+    assert cuts == [street]
+    fresh = cut([street], 128)
+    assert np.array_equal(first.labels, fresh.labels) and first.labels.any()
+    assert np.array_equal(first.features, fresh.features)
+    assert first.embeddings is not None
+    assert first.embeddings.shape == (int(fresh.has_crop.sum()), EMBEDDING_DIM)
+    cache = tmp_path / "street_8101.segments.npz"
+    assert cache.is_file() and not list(tmp_path.glob("*.part*"))
+
+    again = lodo.street_set(street, 128)  # read back, not cut again
+    assert cuts == [street]
+    assert np.array_equal(again.features, first.features)
+    assert np.array_equal(again.embeddings, first.embeddings)
+    assert again.sources == first.sources
+
+    lodo.street_set(street, 96)  # crops of another size: cut again
+    assert cuts == [street, street]
+    with np.load(cache) as saved:  # and as if cut with other extraction parameters
+        kept = {k: saved[k] for k in saved.files}
+    kept["key"] = np.array(str(kept["key"]).replace('"extraction"', '"extraction_before"'))
+    np.savez(cache, **kept)
+    lodo.street_set(street, 96)
+    assert cuts == [street, street, street]
+
+
+def test_draws_are_pools_one_to_nine(lodo) -> None:  # type: ignore[no-untyped-def]
+    import argparse
+
+    assert lodo.draw_list("1,2") == [1, 2]
+    for text in ("0", "10", "1,x", ""):
+        with pytest.raises(argparse.ArgumentTypeError):
+            lodo.draw_list(text)
