@@ -36,6 +36,7 @@ minutes, cutting and embedding them some 15 more, then 3-5 minutes per design an
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import multiprocessing
 import shutil
@@ -162,15 +163,7 @@ def street_set(drive: Path, crop_size: int) -> TrainingSet:
         sources=np.array(json.dumps(data.sources)),
     )
     part.replace(cache)
-    return TrainingSet(
-        features=data.features,
-        labels=data.labels,
-        groups=data.groups,
-        has_crop=data.has_crop,
-        crops=None,
-        sources=data.sources,
-        embeddings=embeddings,
-    )
+    return dataclasses.replace(data, crops=None, embeddings=embeddings)
 
 
 def joined(sets: list[TrainingSet]) -> TrainingSet:
