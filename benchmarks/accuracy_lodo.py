@@ -57,6 +57,7 @@ from guardrail_core.extract.classify import ClassifierParams  # noqa: E402
 from guardrail_core.extract.model_folder import save_model  # noqa: E402
 from guardrail_core.extract.pipeline import ExtractionParams  # noqa: E402
 from guardrail_core.extract.segment_head import SegmentHeadParams  # noqa: E402
+from guardrail_core.extract.shape_features import SEGMENT_FEATURE_NAMES  # noqa: E402
 from guardrail_core.extract.training import (  # noqa: E402
     TrainingSet,
     labelled_segments,
@@ -134,7 +135,9 @@ def street_set(drive: Path, crop_size: int) -> TrainingSet:
     parameters differ from those it was cut with."""
     cache = drive.with_name(drive.name + ".segments.npz")
     extraction = json.dumps(ExtractionParams().to_json(), sort_keys=True)
-    key = json.dumps({"extraction": extraction, "crop_size": crop_size})
+    key = json.dumps(
+        {"extraction": extraction, "crop_size": crop_size, "features": SEGMENT_FEATURE_NAMES}
+    )
     if cache.is_file():
         with np.load(cache) as saved:
             if str(saved["key"]) == key:

@@ -110,6 +110,10 @@ def test_a_street_is_cut_once_and_again_when_cut_otherwise(
     np.savez(cache, **kept)
     lodo.street_set(street, 96)
     assert cuts == [street, street, street]
+    # Cut when the segment features were others (before chains): cut again.
+    monkeypatch.setattr(lodo, "SEGMENT_FEATURE_NAMES", lodo.SEGMENT_FEATURE_NAMES[:-1])
+    lodo.street_set(street, 96)
+    assert cuts == [street] * 4
 
 
 def test_draws_are_pools_one_to_nine(lodo) -> None:  # type: ignore[no-untyped-def]

@@ -21,7 +21,12 @@ from guardrail_core.extract.segment_head import (
     head_inputs,
     members_of,
 )
-from guardrail_core.extract.shape_features import SEGMENT_FEATURE_DIM, SEGMENT_FEATURE_NAMES
+from guardrail_core.extract.shape_features import (
+    NEIGHBOUR_FEATURE_NAMES,
+    SEGMENT_FEATURE_DIM,
+    SHAPE_FEATURE_NAMES,
+    WHOLE_COMPONENT_FEATURE_NAMES,
+)
 
 QUICK = SegmentHeadParams(hidden_units=16, epochs=300, members=1)
 
@@ -80,9 +85,12 @@ def test_weights_round_trip_and_errors() -> None:
 def test_a_model_trained_on_drives_has_a_measured_segment_head(model_path: Path) -> None:
     model = load_model(model_path)
     assert model.segment_head is not None
-    assert model.segment_head.n_inputs == SEGMENT_FEATURE_DIM + 2
+    # A model trained now reads the chain features, not those over whole components.
+    read = SHAPE_FEATURE_NAMES + NEIGHBOUR_FEATURE_NAMES
+    assert model.segment_head.n_inputs == len(read) + 2
     info = model.info
-    assert info["segment_head"]["features"] == list(SEGMENT_FEATURE_NAMES)
+    assert info["segment_head"]["features"] == list(read)
+    assert not set(read) & set(WHOLE_COMPONENT_FEATURE_NAMES)
     held, crops = info["metrics"]["held_out"], info["metrics"]["held_out_crops"]
     # Segments are measured with or without a crop, so more of them than crops.
     assert held["n_train"] + held["n_held_out"] == info["trained_on"]["segments"]

@@ -184,7 +184,7 @@ def slice_drive(
             points.intensity,
             segments,
             segment_extents(segments, summary),
-            params.segments.slice_length_m,
+            params.segments,
             params.correction,
         )
     point_segment = segments.point_segment.copy()

@@ -15,9 +15,13 @@ import numpy as np
 import torch
 from torch import nn
 
-from guardrail_core.errors import InvalidOptionError, ModelFormatError
+from guardrail_core.errors import IncompatibleModelError, InvalidOptionError, ModelFormatError
 from guardrail_core.extract.classifier_params import TRAINING_CLIP
-from guardrail_core.extract.shape_features import SEGMENT_FEATURE_NAMES, feature_columns
+from guardrail_core.extract.shape_features import (
+    SEGMENT_FEATURE_NAMES,
+    WHOLE_COMPONENT_FEATURE_NAMES,
+    feature_columns,
+)
 from guardrail_core.extract.torch_threads import one_thread
 from guardrail_core.params import StageParams, param
 
@@ -89,9 +93,11 @@ class SegmentHeadParams(StageParams):
             self.fail(f"ignored_features: {exc}")
 
     def feature_names(self) -> tuple[str, ...]:
-        """The segment features the head reads, in :data:`SEGMENT_FEATURE_NAMES` order."""
+        """The segment features the head reads, in :data:`SEGMENT_FEATURE_NAMES` order: all but
+        the ignored ones and those kept for models trained before chains."""
         ignored = [name.strip() for name in self.ignored_features.split(",") if name.strip()]
         feature_columns(ignored)  # every name known
+        ignored += WHOLE_COMPONENT_FEATURE_NAMES
         return tuple(name for name in SEGMENT_FEATURE_NAMES if name not in ignored)
 
     def columns(self) -> np.ndarray:
@@ -100,6 +106,16 @@ class SegmentHeadParams(StageParams):
         if not names:
             raise ValueError("every segment feature is ignored")
         return feature_columns(names)
+
+
+def _refuse_missing(features: np.ndarray) -> None:
+    """Segment features are finite; NaN marks those a run processed before chains lacks
+    (:func:`~guardrail_core.extract.shape_features.features_before_chains`)."""
+    if np.isnan(features).any():
+        raise IncompatibleModelError(
+            "segment head: it reads segment features these segments do not hold (a run "
+            "processed before chains, 2026-11-29); process the drive again"
+        )
 
 
 def head_inputs(
@@ -216,7 +232,9 @@ class SegmentHead:
                 f"segment head: expected (S, F) features with the columns it reads, got "
                 f"{features.shape}"
             )
-        return np.ascontiguousarray(features[:, self.columns])  # a column pick is F-ordered
+        read = np.ascontiguousarray(features[:, self.columns])  # a column pick is F-ordered
+        _refuse_missing(read)
+        return read
 
     def proba(
         self, features: np.ndarray, crop_proba: np.ndarray, clip: float = TRAINING_CLIP
@@ -356,6 +374,7 @@ def fit_segment_head(
     """
     if columns is not None:
         features = np.ascontiguousarray(np.asarray(features, np.float32)[:, np.asarray(columns)])
+    _refuse_missing(features)
     x = head_inputs(features, crop_proba)
     y = np.asarray(labels, bool)
     counts = np.array([np.count_nonzero(~y), np.count_nonzero(y)], np.float64)

@@ -2,10 +2,10 @@
 
 A guardrail is long, parallel to the road, continuous along it and at rail height; a bicycle rack
 or a sign post is short, a hedge is scattered. These features describe a segment (its size,
-height, shape and intensity) and the connected component it was cut from (its length along the
-road and how straight beside it), all in track coordinates, so they do not depend on where the
-road runs. The classifier fuses them with the crop's embedding, and classifies segments that have
-no crop from them alone.
+height, shape and intensity) and the chain of pieces it belongs to (its length along the road
+and how straight beside it; see :mod:`guardrail_core.extract.chains`), all in track coordinates,
+so they do not depend on where the road runs. The classifier fuses them with the crop's
+embedding, and classifies segments that have no crop from them alone.
 """
 
 from __future__ import annotations
@@ -14,8 +14,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from guardrail_core.extract.chains import piece_chains
 from guardrail_core.extract.correct import CorrectionParams, SegmentExtents, neighbour_pairs
-from guardrail_core.extract.segments import Segments
+from guardrail_core.extract.segments import SegmentParams, Segments
 
 SHAPE_FEATURE_NAMES = (
     "height_min_m",
@@ -34,12 +35,12 @@ SHAPE_FEATURE_NAMES = (
     "normal_across_road",
     "station_coverage",
     "height_coverage",
-    "component_log_length_m",
-    "component_log_slices",
-    "component_height_min_m",
-    "component_height_max_m",
-    "component_lateral_spread_m",
-    "component_lateral_slope",
+    "chain_log_length_m",
+    "chain_log_slices",
+    "chain_height_min_m",
+    "chain_height_max_m",
+    "chain_lateral_spread_m",
+    "chain_lateral_slope",
 )
 # The offset from the trajectory and the width across it are left out on purpose: they tell the
 # near side of the road from the far side, not a guardrail from anything else, and a model that
@@ -48,12 +49,51 @@ SHAPE_FEATURE_DIM = len(SHAPE_FEATURE_NAMES)
 
 NEIGHBOUR_FEATURE_NAMES = (
     "neighbours_log_count",
-    "neighbours_max_component_log_length_m",
+    "neighbours_max_chain_log_length_m",
     "neighbours_max_log_points",
     "neighbours_max_height_m",
 )
-SEGMENT_FEATURE_NAMES = SHAPE_FEATURE_NAMES + NEIGHBOUR_FEATURE_NAMES
+# The chain features taken over the whole component, and the longest neighbour's by them: what
+# models trained before chains (2026-11-29) read. They are computed for those models alone; no
+# model is trained on them now (SegmentHeadParams.feature_names leaves them out).
+WHOLE_COMPONENT_FEATURE_NAMES = (
+    "component_log_length_m",
+    "component_log_slices",
+    "component_height_min_m",
+    "component_height_max_m",
+    "component_lateral_spread_m",
+    "component_lateral_slope",
+    "neighbours_max_component_log_length_m",
+)
+SEGMENT_FEATURE_NAMES = (
+    SHAPE_FEATURE_NAMES + NEIGHBOUR_FEATURE_NAMES + WHOLE_COMPONENT_FEATURE_NAMES
+)
 SEGMENT_FEATURE_DIM = len(SEGMENT_FEATURE_NAMES)
+# The columns of segment features written before chains (run folders of 2026-11-29 and before).
+_NAMES_BEFORE_CHAINS = tuple(
+    name.replace("chain", "component") for name in SHAPE_FEATURE_NAMES + NEIGHBOUR_FEATURE_NAMES
+)
+
+
+def features_before_chains(features: np.ndarray) -> np.ndarray:
+    """Segment features as this version lays them out, from a table written before chains.
+
+    Parameters
+    ----------
+    features : (S, F) float32; F = 26 for a table written before chains (a run folder of
+        2026-11-29 or before), which has the whole-component columns where the chain columns
+        are now; any other F is returned as it is
+
+    Returns
+    -------
+    (S, SEGMENT_FEATURE_DIM) float32 with NaN for the chain columns, which a table before
+    chains does not hold (a segment head that reads them refuses NaN); or ``features``.
+    """
+    if features.ndim != 2 or features.shape[1] != len(_NAMES_BEFORE_CHAINS):
+        return features
+    out = np.full((len(features), SEGMENT_FEATURE_DIM), np.nan, np.float32)
+    out[:, feature_columns(_NAMES_BEFORE_CHAINS)] = features
+    return out
 
 
 def feature_columns(names: Sequence[str]) -> np.ndarray:
@@ -75,7 +115,7 @@ def feature_columns(names: Sequence[str]) -> np.ndarray:
 
 _BIN_M = 0.05  # coverage bins along the road and in height (metres)
 _INTENSITY_SCALE = 65535.0  # LAS intensity is uint16
-_MAX_SLOPE = 10.0  # a component's lateral drift per metre along the road is clipped to this
+_MAX_SLOPE = 10.0  # a chain's lateral drift per metre along the road is clipped to this
 
 
 def shape_features(
@@ -84,7 +124,7 @@ def shape_features(
     height: np.ndarray,
     intensity: np.ndarray,
     segments: Segments,
-    slice_length_m: float,
+    params: SegmentParams = SegmentParams(),
 ) -> np.ndarray:
     """Shape features of every segment.
 
@@ -94,16 +134,31 @@ def shape_features(
         (see :mod:`guardrail_core.sensors.track`)
     intensity : (N,) uint16, return intensity
     segments : the sliced segments of those N points
-    slice_length_m : the slice length the segments were cut with
+    params : the slice length the segments were cut with (``slice_length_m``) and the chains'
+        gap (``chain_gap_m``)
 
     Returns
     -------
     (S, SHAPE_FEATURE_DIM) float32, columns named by :data:`SHAPE_FEATURE_NAMES`; finite.
     """
+    return _shape_and_whole_component(station, lateral, height, intensity, segments, params)[0]
+
+
+def _shape_and_whole_component(
+    station: np.ndarray,
+    lateral: np.ndarray,
+    height: np.ndarray,
+    intensity: np.ndarray,
+    segments: Segments,
+    params: SegmentParams,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`shape_features`, and (S, 6) float32 its chain columns taken over each segment's
+    whole component (the first six of :data:`WHOLE_COMPONENT_FEATURE_NAMES`)."""
     n_seg = len(segments)
     out = np.zeros((n_seg, SHAPE_FEATURE_DIM), np.float32)
     if n_seg == 0:
-        return out
+        return out, np.zeros((0, 6), np.float32)
+    slice_length_m = params.slice_length_m
     order = segments.order
     starts = segments.starts[:-1]
     count = segments.n_points.astype(np.float64)
@@ -122,6 +177,7 @@ def shape_features(
 
     h_min, h_max = span(h)
     s_min, s_max = span(s)
+    l_min, l_max = span(lat)
     l_mean = mean(lat)
     h_mean = mean(h)
     i_mean = mean(inten)
@@ -146,30 +202,12 @@ def shape_features(
         np.floor((h_max - h_min) / _BIN_M) + 1.0
     )
 
-    # The component each segment was cut from: its length along the road and its course.
-    comp = segments.component.astype(np.int64)
-    _, comp_index = np.unique(comp, return_inverse=True)
-    n_comp = int(comp_index.max()) + 1
-    slices = segments.slice_index.astype(np.float64)
-    c_first = np.full(n_comp, np.inf)
-    c_last = np.full(n_comp, -np.inf)
-    np.minimum.at(c_first, comp_index, slices * slice_length_m + s_min)
-    np.maximum.at(c_last, comp_index, slices * slice_length_m + s_max)
-    c_slices = np.bincount(comp_index, minlength=n_comp).astype(np.float64)
-    c_hmin = np.full(n_comp, np.inf)
-    c_hmax = np.full(n_comp, -np.inf)
-    np.minimum.at(c_hmin, comp_index, h_min)
-    np.maximum.at(c_hmax, comp_index, h_max)
-    # Lateral course: a least-squares line of the segments' mean offset against station.
-    x = slices * slice_length_m
-    w = np.bincount(comp_index, minlength=n_comp).astype(np.float64)
-    sx = np.bincount(comp_index, x, n_comp) / w
-    sy = np.bincount(comp_index, l_mean, n_comp) / w
-    sxx = np.bincount(comp_index, x * x, n_comp) / w - sx**2
-    sxy = np.bincount(comp_index, x * l_mean, n_comp) / w - sx * sy
-    syy = np.maximum(np.bincount(comp_index, l_mean * l_mean, n_comp) / w - sy**2, 0.0)
-    slope = np.where(sxx > 1e-9, sxy / np.maximum(sxx, 1e-9), 0.0)
-    residual = np.sqrt(np.maximum(syy - slope * sxy, 0.0))
+    # The chain each segment belongs to (and, for models from before chains, its whole
+    # component): its length along the road and its course.
+    chain = piece_chains(segments.component, segments.slice_index, l_min, l_max, params.chain_gap_m)
+    station_m = segments.slice_index.astype(np.float64) * slice_length_m
+    course = (station_m + s_min, station_m + s_max, h_min, h_max, station_m, l_mean)
+    _, component = np.unique(segments.component, return_inverse=True)
 
     columns = [
         h_min,
@@ -188,15 +226,58 @@ def shape_features(
         np.abs(normal[:, 1]),
         s_cover,
         h_cover,
-        np.log1p((c_last - c_first)[comp_index]),
-        np.log(c_slices[comp_index]),
-        c_hmin[comp_index],
-        c_hmax[comp_index],
-        residual[comp_index],
-        np.minimum(np.abs(slope), _MAX_SLOPE)[comp_index],
+        *_course_features(chain, *course),
     ]
     out[:] = np.stack(columns, axis=1)
-    return np.nan_to_num(out, nan=0.0, posinf=0.0, neginf=0.0)
+    whole = np.stack(_course_features(component, *course), axis=1).astype(np.float32)
+    return (
+        np.nan_to_num(out, nan=0.0, posinf=0.0, neginf=0.0),
+        np.nan_to_num(whole, nan=0.0, posinf=0.0, neginf=0.0),
+    )
+
+
+def _course_features(
+    group: np.ndarray,
+    first_m: np.ndarray,
+    last_m: np.ndarray,
+    h_min: np.ndarray,
+    h_max: np.ndarray,
+    station_m: np.ndarray,
+    l_mean: np.ndarray,
+) -> list[np.ndarray]:
+    """Each segment's group's (chain's or component's) length along the road, segments,
+    heights and lateral course: six (S,) float64 columns, as the chain features are named.
+
+    ``group`` (S,) int64 numbers the groups from 0; the rest are (S,) float64 metres: where
+    each segment starts and ends along the road, its lowest and highest point, its slice's
+    start and its mean lateral offset.
+    """
+    n_group = int(group.max()) + 1
+    first = np.full(n_group, np.inf)
+    last = np.full(n_group, -np.inf)
+    np.minimum.at(first, group, first_m)
+    np.maximum.at(last, group, last_m)
+    low = np.full(n_group, np.inf)
+    high = np.full(n_group, -np.inf)
+    np.minimum.at(low, group, h_min)
+    np.maximum.at(high, group, h_max)
+    # Lateral course: a least-squares line of the segments' mean offset against station.
+    w = np.bincount(group, minlength=n_group).astype(np.float64)
+    sx = np.bincount(group, station_m, n_group) / w
+    sy = np.bincount(group, l_mean, n_group) / w
+    sxx = np.bincount(group, station_m * station_m, n_group) / w - sx**2
+    sxy = np.bincount(group, station_m * l_mean, n_group) / w - sx * sy
+    syy = np.maximum(np.bincount(group, l_mean * l_mean, n_group) / w - sy**2, 0.0)
+    slope = np.where(sxx > 1e-9, sxy / np.maximum(sxx, 1e-9), 0.0)
+    residual = np.sqrt(np.maximum(syy - slope * sxy, 0.0))
+    return [
+        np.log1p((last - first)[group]),
+        np.log(w[group]),
+        low[group],
+        high[group],
+        residual[group],
+        np.minimum(np.abs(slope), _MAX_SLOPE)[group],
+    ]
 
 
 def neighbour_features(
@@ -216,18 +297,29 @@ def neighbour_features(
     (S, len(NEIGHBOUR_FEATURE_NAMES)) float32; a segment without neighbours gets 0 count and -1
     for the maxima.
     """
-    n = len(shape)
+    return _neighbour_columns(shape, *_neighbours(extents, params))
+
+
+def _neighbours(extents: SegmentExtents, params: CorrectionParams) -> tuple[np.ndarray, ...]:
+    """(P,) int64 ``a`` and ``b``: segment ``a[k]`` has neighbour ``b[k]`` (both ways)."""
     pairs = neighbour_pairs(extents, params)
-    a = np.concatenate([pairs[:, 0], pairs[:, 1]])
-    b = np.concatenate([pairs[:, 1], pairs[:, 0]])
+    return np.r_[pairs[:, 0], pairs[:, 1]], np.r_[pairs[:, 1], pairs[:, 0]]
+
+
+def _neighbour_columns(shape: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    n = len(shape)
     out = np.full((n, len(NEIGHBOUR_FEATURE_NAMES)), -1.0, np.float32)
     out[:, 0] = np.log1p(np.bincount(a, minlength=n))
-    for column, name in enumerate(
-        ("component_log_length_m", "log_points", "height_max_m"), start=1
-    ):
-        values = np.full(n, -1.0, np.float32)
-        np.maximum.at(values, a, shape[b, SHAPE_FEATURE_NAMES.index(name)])
-        out[:, column] = values
+    for column, name in enumerate(("chain_log_length_m", "log_points", "height_max_m"), start=1):
+        out[:, column] = _neighbours_max(shape[:, SHAPE_FEATURE_NAMES.index(name)], a, b)
+    return out
+
+
+def _neighbours_max(values: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(S,) float32 the largest of ``values`` (S,) over each segment's neighbours (segment
+    ``a[k]`` has neighbour ``b[k]``), -1 for a segment without."""
+    out = np.full(len(values), -1.0, np.float32)
+    np.maximum.at(out, a, values[b])
     return out
 
 
@@ -238,12 +330,15 @@ def segment_features(
     intensity: np.ndarray,
     segments: Segments,
     extents: SegmentExtents,
-    slice_length_m: float,
+    params: SegmentParams = SegmentParams(),
     correction: CorrectionParams = CorrectionParams(),
 ) -> np.ndarray:
-    """(S, SEGMENT_FEATURE_DIM) float32: :func:`shape_features` then :func:`neighbour_features`."""
-    shape = shape_features(station, lateral, height, intensity, segments, slice_length_m)
-    return np.concatenate([shape, neighbour_features(shape, extents, correction)], axis=1)
+    """(S, SEGMENT_FEATURE_DIM) float32: :func:`shape_features`, :func:`neighbour_features`, then
+    the :data:`WHOLE_COMPONENT_FEATURE_NAMES` (for models trained before chains)."""
+    shape, whole = _shape_and_whole_component(station, lateral, height, intensity, segments, params)
+    a, b = _neighbours(extents, correction)
+    longest = _neighbours_max(whole[:, 0], a, b)
+    return np.concatenate([shape, _neighbour_columns(shape, a, b), whole, longest[:, None]], axis=1)
 
 
 def _distinct_per_segment(seg_of: np.ndarray, value: np.ndarray, n_seg: int) -> np.ndarray:

@@ -1,0 +1,71 @@
+"""A run processed before chains: its features read back in today's layout; a model trained
+before chains reads them as it did, one that reads the chain features refuses them by name."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from guardrail_core.errors import IncompatibleModelError
+from guardrail_core.extract.model_folder import DEFAULT_MODEL_DIR, load_model
+from guardrail_core.extract.shape_features import (
+    NEIGHBOUR_FEATURE_NAMES,
+    SEGMENT_FEATURE_DIM,
+    SHAPE_FEATURE_NAMES,
+    WHOLE_COMPONENT_FEATURE_NAMES,
+    feature_columns,
+    features_before_chains,
+)
+from guardrail_core.formats.run_folder import load_run
+
+BEFORE = [
+    name.replace("chain", "component") for name in SHAPE_FEATURE_NAMES + NEIGHBOUR_FEATURE_NAMES
+]
+CHAINS = [name for name in SHAPE_FEATURE_NAMES + NEIGHBOUR_FEATURE_NAMES if "chain" in name]
+
+
+def _as_before_chains(run_path: Path, folder: Path) -> np.ndarray:
+    """A copy of the run whose segments.npz holds its features as written before chains."""
+    shutil.copytree(run_path, folder)
+    path = folder / "segments.npz"
+    with np.load(path) as saved:
+        kept = {name: saved[name] for name in saved.files}
+    today = kept["features"]
+    kept["features"] = today[:, feature_columns(BEFORE)]
+    assert kept["features"].shape[1] == 26
+    np.savez(path, **kept)
+    return today
+
+
+def test_a_run_before_chains_is_read_in_todays_layout(run_path: Path, tmp_path: Path) -> None:
+    today = _as_before_chains(run_path, tmp_path / "run")
+    features = load_run(tmp_path / "run").segments["features"]
+    assert features.shape == (len(today), SEGMENT_FEATURE_DIM)
+    kept = feature_columns(BEFORE)
+    np.testing.assert_array_equal(features[:, kept], today[:, kept])
+    assert np.isnan(features[:, feature_columns(CHAINS)]).all()
+    assert len(BEFORE) + len(CHAINS) == SEGMENT_FEATURE_DIM
+    assert set(WHOLE_COMPONENT_FEATURE_NAMES) <= set(BEFORE)
+    # A table in today's layout is left as it is.
+    assert features_before_chains(today) is today
+
+
+def test_models_before_chains_read_it_as_before_and_chain_models_refuse_it(
+    run_path: Path, model_path: Path, tmp_path: Path
+) -> None:
+    today = _as_before_chains(run_path, tmp_path / "run")
+    features = load_run(tmp_path / "run").segments["features"]
+    crop = np.full(len(features), np.nan)
+    shipped = load_model(DEFAULT_MODEL_DIR)  # trained before chains: reads the whole components
+    assert shipped.segment_head is not None
+    np.testing.assert_array_equal(
+        shipped.segment_head.proba(features, crop), shipped.segment_head.proba(today, crop)
+    )
+    trained_now = load_model(model_path)  # reads the chain features
+    assert trained_now.segment_head is not None
+    trained_now.segment_head.proba(today, crop)
+    with pytest.raises(IncompatibleModelError, match="processed before chains"):
+        trained_now.segment_head.proba(features, crop)
