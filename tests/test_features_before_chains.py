@@ -1,4 +1,4 @@
-"""A run processed before chains: its features read back in today's layout; a model trained
+"""A run processed before chains holds its features in the layout of then: a model trained
 before chains reads them as it did, one that reads the chain features refuses them by name."""
 
 from __future__ import annotations
@@ -11,6 +11,7 @@ import pytest
 
 from guardrail_core.errors import IncompatibleModelError
 from guardrail_core.extract.model_folder import DEFAULT_MODEL_DIR, load_model
+from guardrail_core.extract.segment_head import fit_segment_head
 from guardrail_core.extract.shape_features import (
     NEIGHBOUR_FEATURE_NAMES,
     SEGMENT_FEATURE_DIM,
@@ -40,9 +41,11 @@ def _as_before_chains(run_path: Path, folder: Path) -> np.ndarray:
     return today
 
 
-def test_a_run_before_chains_is_read_in_todays_layout(run_path: Path, tmp_path: Path) -> None:
+def test_a_table_before_chains_is_laid_out_as_now(run_path: Path, tmp_path: Path) -> None:
     today = _as_before_chains(run_path, tmp_path / "run")
-    features = load_run(tmp_path / "run").segments["features"]
+    stored = load_run(tmp_path / "run").segments["features"]
+    assert stored.shape == (len(today), 26)
+    features = features_before_chains(stored)
     assert features.shape == (len(today), SEGMENT_FEATURE_DIM)
     kept = feature_columns(BEFORE)
     np.testing.assert_array_equal(features[:, kept], today[:, kept])
@@ -57,7 +60,7 @@ def test_models_before_chains_read_it_as_before_and_chain_models_refuse_it(
     run_path: Path, model_path: Path, tmp_path: Path
 ) -> None:
     today = _as_before_chains(run_path, tmp_path / "run")
-    features = load_run(tmp_path / "run").segments["features"]
+    features = load_run(tmp_path / "run").segments["features"]  # 26 columns, as written then
     crop = np.full(len(features), np.nan)
     shipped = load_model(DEFAULT_MODEL_DIR)  # trained before chains: reads the whole components
     assert shipped.segment_head is not None
@@ -69,3 +72,7 @@ def test_models_before_chains_read_it_as_before_and_chain_models_refuse_it(
     trained_now.segment_head.proba(today, crop)
     with pytest.raises(IncompatibleModelError, match="processed before chains"):
         trained_now.segment_head.proba(features, crop)
+    with pytest.raises(IncompatibleModelError, match="processed before chains"):  # nor learns
+        fit_segment_head(
+            features, crop, np.arange(len(features)) % 2 == 0, columns=feature_columns(CHAINS)
+        )

@@ -18,7 +18,10 @@ from guardrail_core.extract.correct import CorrectionParams, SegmentExtents, cor
 from guardrail_core.extract.crops import CROP_OK
 from guardrail_core.extract.model_folder import load_model
 from guardrail_core.extract.segment_head import SegmentHeadParams
-from guardrail_core.extract.shape_features import SEGMENT_FEATURE_NAMES
+from guardrail_core.extract.shape_features import (
+    SEGMENT_FEATURE_NAMES,
+    WHOLE_COMPONENT_FEATURE_NAMES,
+)
 from guardrail_core.extract.training import HOLD_OUT_BLOCK_SLICES, TrainingSet, train_on_set
 from guardrail_core.formats.label_store import LABEL_GUARDRAIL, LABEL_OTHER, UNLABELLED
 from guardrail_core.formats.run_folder import SEGMENT_FIELDS, Run, load_run
@@ -366,9 +369,8 @@ def test_a_segment_head_can_leave_the_intensities_unread(run_path: Path) -> None
     head = SegmentHeadParams(ignored_features="intensity_mean, intensity_std")
     model = train_on_set(data, params=ClassifierParams(mode="fast"), head=head).model
     names = model.info["segment_head"]["features"]
-    assert names == [
-        n for n in SEGMENT_FEATURE_NAMES if n not in ("intensity_mean", "intensity_std")
-    ]
+    unread = ("intensity_mean", "intensity_std", *WHOLE_COMPONENT_FEATURE_NAMES)
+    assert names == [n for n in SEGMENT_FEATURE_NAMES if n not in unread]
     assert model.segment_head is not None and model.segment_head.n_inputs == len(names) + 2
     # Another scanner's intensities change nothing.
     features = data.features.copy()
@@ -402,7 +404,8 @@ def test_fine_tuning_starts_from_the_given_models_segment_head(run_path: Path) -
     )
     fresh = train_from_run(run, labels, head=still).model
     assert fresh.info["trained_on"]["segment_head_from"] is None
-    assert len(fresh.info["segment_head"]["features"]) == len(SEGMENT_FEATURE_NAMES)
+    read = [n for n in SEGMENT_FEATURE_NAMES if n not in WHOLE_COMPONENT_FEATURE_NAMES]
+    assert fresh.info["segment_head"]["features"] == read
 
 
 def test_train_from_run_on_one_class_of_operator_labels_is_refused(run_path: Path) -> None:

@@ -21,6 +21,7 @@ from guardrail_core.extract.shape_features import (
     SEGMENT_FEATURE_NAMES,
     WHOLE_COMPONENT_FEATURE_NAMES,
     feature_columns,
+    features_before_chains,
 )
 from guardrail_core.extract.torch_threads import one_thread
 from guardrail_core.params import StageParams, param
@@ -227,6 +228,7 @@ class SegmentHead:
         features = np.asarray(features, np.float32)
         if self.columns is None:
             return features
+        features = features_before_chains(features)  # a run processed before chains
         if features.ndim != 2 or features.shape[1] <= self.columns.max(initial=-1):
             raise InvalidOptionError(
                 f"segment head: expected (S, F) features with the columns it reads, got "
@@ -373,7 +375,8 @@ def fit_segment_head(
         of ``params.hidden_units`` (else :class:`InvalidOptionError`)
     """
     if columns is not None:
-        features = np.ascontiguousarray(np.asarray(features, np.float32)[:, np.asarray(columns)])
+        features = features_before_chains(np.asarray(features, np.float32))
+        features = np.ascontiguousarray(features[:, np.asarray(columns)])
     _refuse_missing(features)
     x = head_inputs(features, crop_proba)
     y = np.asarray(labels, bool)

@@ -164,18 +164,12 @@ class RunFolder:
         return np.concatenate(tiles) if tiles else np.zeros(0, np.int32)
 
     def segments(self) -> dict[str, np.ndarray]:
-        """Every ``SEGMENT_FIELDS`` array of ``segments.npz``, S rows each (the features of a
-        run processed before chains laid out as now, the chain columns NaN)."""
-        # The features' layout is the extraction's (imported here, when a run is read).
-        from guardrail_core.extract.shape_features import features_before_chains
-
+        """Every ``SEGMENT_FIELDS`` array of ``segments.npz``, S rows each."""
         try:
             with np.load(self.segments_file, allow_pickle=False) as data:
-                segments = {name: data[name] for name in SEGMENT_FIELDS}
+                return {name: data[name] for name in SEGMENT_FIELDS}
         except (OSError, KeyError, ValueError) as exc:
             raise RunFolderError(f"{self.segments_file}: missing or damaged ({exc})") from exc
-        segments["features"] = features_before_chains(segments["features"])
-        return segments
 
     def timings(self) -> dict[str, Any]:
         """``timings.json``: ``points_in``, ``stages`` (seconds and points each), ``total_seconds``."""
