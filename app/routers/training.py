@@ -13,6 +13,7 @@ from app.jobs import JobBusyError, JobRunner
 from app.model_registry import UnknownModelError
 from app.schemas import CONFLICT, NOT_FOUND, Activated, Job, JobList, JobStarted, ModelList
 from app.session import ReviewSession
+from guardrail_core.errors import IncompatibleModelError
 
 router = APIRouter(prefix="/api", tags=["training"])
 Session = Annotated[ReviewSession, Depends(get_session)]
@@ -84,10 +85,16 @@ def get_models(session: Session) -> dict[str, Any]:
     return {"active": session.models.active_version, "models": session.models.list()}
 
 
-@router.post("/models/{version}/activate", response_model=Activated, responses=NOT_FOUND)
+@router.post(
+    "/models/{version}/activate", response_model=Activated, responses={**NOT_FOUND, **CONFLICT}
+)
 def post_activate(session: Session, version: str) -> dict[str, Any]:
-    """Re-predict the run with this model and make it the active one."""
+    """Re-predict the run with this model and make it the active one (409, the run unchanged,
+    when the model reads segment features the run does not hold: a run processed before chains
+    and a model trained since)."""
     try:
         return review_jobs.activate(session, version)
     except UnknownModelError as exc:
         raise HTTPException(404, detail=f"no model folder of version {version} is known") from exc
+    except IncompatibleModelError as exc:
+        raise HTTPException(409, detail=str(exc)) from exc

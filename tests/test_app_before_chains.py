@@ -1,0 +1,62 @@
+"""The review app on a run processed before chains: a model that reads the chain features is
+refused by name (409) and the run stays as it was."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+
+from app.jobs import JobRunner
+from app.main import create_app
+from app.session import ReviewSession
+from guardrail_core.extract.shape_features import (
+    NEIGHBOUR_FEATURE_NAMES,
+    SHAPE_FEATURE_NAMES,
+    feature_columns,
+)
+from tests.app_fixtures import copy_run, new_session
+
+BEFORE = [
+    name.replace("chain", "component") for name in SHAPE_FEATURE_NAMES + NEIGHBOUR_FEATURE_NAMES
+]
+
+
+@pytest.fixture()
+def old_run(run_path: Path, tmp_path: Path) -> Path:
+    """A copy of the test run whose segments.npz holds 26 feature columns, as before chains."""
+    run = copy_run(run_path, tmp_path)
+    path = run / "segments.npz"
+    with np.load(path) as saved:
+        kept = {name: saved[name] for name in saved.files}
+    kept["features"] = kept["features"][:, feature_columns(BEFORE)]
+    np.savez(path, **kept)
+    return run
+
+
+@pytest.fixture()
+def client(
+    drive_path: Path, old_run: Path, model_path: Path, tmp_path: Path
+) -> Iterator[TestClient]:
+    session: ReviewSession = new_session(drive_path, old_run, tmp_path / "review", model_path)
+    jobs = JobRunner()
+    with TestClient(create_app(session, jobs=jobs)) as c:
+        yield c
+    jobs.shutdown()
+    session.close()
+
+
+def test_a_model_reading_chains_is_refused_on_a_run_before_them(
+    client: TestClient, old_run: Path
+) -> None:
+    before = {name: (old_run / name).read_bytes() for name in ("segments.npz", "run.json")}
+    version = client.get("/api/models").json()["active"]  # trained now: it reads chains
+    answer = client.post(f"/api/models/{version}/activate", json={})
+    assert answer.status_code == 409
+    assert "processed before chains" in answer.json()["detail"]
+    assert "process the drive again" in answer.json()["detail"]
+    for name, content in before.items():
+        assert (old_run / name).read_bytes() == content, name
