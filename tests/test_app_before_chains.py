@@ -6,35 +6,20 @@ from __future__ import annotations
 from collections.abc import Iterator
 from pathlib import Path
 
-import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
 from app.jobs import JobRunner
 from app.main import create_app
 from app.session import ReviewSession
-from guardrail_core.extract.shape_features import (
-    NEIGHBOUR_FEATURE_NAMES,
-    SHAPE_FEATURE_NAMES,
-    feature_columns,
-)
-from tests.app_fixtures import copy_run, new_session
-
-BEFORE = [
-    name.replace("chain", "component") for name in SHAPE_FEATURE_NAMES + NEIGHBOUR_FEATURE_NAMES
-]
+from tests.app_fixtures import new_session
+from tests.run_before_chains import copy_run_before_chains
 
 
 @pytest.fixture()
 def old_run(run_path: Path, tmp_path: Path) -> Path:
-    """A copy of the test run whose segments.npz holds 26 feature columns, as before chains."""
-    run = copy_run(run_path, tmp_path)
-    path = run / "segments.npz"
-    with np.load(path) as saved:
-        kept = {name: saved[name] for name in saved.files}
-    kept["features"] = kept["features"][:, feature_columns(BEFORE)]
-    np.savez(path, **kept)
-    return run
+    copy_run_before_chains(run_path, tmp_path / "run")
+    return tmp_path / "run"
 
 
 @pytest.fixture()

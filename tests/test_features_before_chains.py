@@ -3,7 +3,6 @@ before chains reads them as it did, one that reads the chain features refuses th
 
 from __future__ import annotations
 
-import shutil
 from pathlib import Path
 
 import numpy as np
@@ -21,28 +20,13 @@ from guardrail_core.extract.shape_features import (
     features_before_chains,
 )
 from guardrail_core.formats.run_folder import load_run
+from tests.run_before_chains import BEFORE, copy_run_before_chains
 
-BEFORE = [
-    name.replace("chain", "component") for name in SHAPE_FEATURE_NAMES + NEIGHBOUR_FEATURE_NAMES
-]
 CHAINS = [name for name in SHAPE_FEATURE_NAMES + NEIGHBOUR_FEATURE_NAMES if "chain" in name]
 
 
-def _as_before_chains(run_path: Path, folder: Path) -> np.ndarray:
-    """A copy of the run whose segments.npz holds its features as written before chains."""
-    shutil.copytree(run_path, folder)
-    path = folder / "segments.npz"
-    with np.load(path) as saved:
-        kept = {name: saved[name] for name in saved.files}
-    today = kept["features"]
-    kept["features"] = today[:, feature_columns(BEFORE)]
-    assert kept["features"].shape[1] == 26
-    np.savez(path, **kept)
-    return today
-
-
 def test_a_table_before_chains_is_laid_out_as_now(run_path: Path, tmp_path: Path) -> None:
-    today = _as_before_chains(run_path, tmp_path / "run")
+    today = copy_run_before_chains(run_path, tmp_path / "run")
     stored = load_run(tmp_path / "run").segments["features"]
     assert stored.shape == (len(today), 26)
     features = features_before_chains(stored)
@@ -59,7 +43,7 @@ def test_a_table_before_chains_is_laid_out_as_now(run_path: Path, tmp_path: Path
 def test_models_before_chains_read_it_as_before_and_chain_models_refuse_it(
     run_path: Path, model_path: Path, tmp_path: Path
 ) -> None:
-    today = _as_before_chains(run_path, tmp_path / "run")
+    today = copy_run_before_chains(run_path, tmp_path / "run")
     features = load_run(tmp_path / "run").segments["features"]  # 26 columns, as written then
     crop = np.full(len(features), np.nan)
     shipped = load_model(DEFAULT_MODEL_DIR)  # trained before chains: reads the whole components
