@@ -102,6 +102,9 @@ class ReviewScene:
         self._quiet_sliders = False  # set while the code, not an operator, moves the sliders
         self._tuner: RunTuner | None = None
         self._tune_timer: threading.Timer | None = None
+        # One re-run at a time: a debounced one still running when another starts would
+        # otherwise draw its older sliders' plot over the newer one's.
+        self._tune_lock = threading.Lock()
         self.last_tune_seconds: float | None = None
         # A lasso being drawn: its corners (screen position, drawn point) and the view.
         self._lasso: list[tuple[np.ndarray, np.ndarray]] | None = None
@@ -569,11 +572,16 @@ class ReviewScene:
     def retune(self) -> float | None:
         """Re-run the chosen run's unit model with the sliders' values and show its mesh, the
         previous one ghosted; returns the seconds the re-run took."""
+        with self._tune_lock:
+            return self._retune()
+
+    def _retune(self) -> float | None:
         run_id = self._chosen_run()
         if self._tuner is None or run_id is None:
             return None
+        params = self.slider_params()
         try:
-            result = self._tuner.retune(run_id, self.slider_params())
+            result = self._tuner.retune(run_id, params)
         except (GuardrailError, ValueError) as exc:
             self._tune_text.content = f"**Not re-run:** {exc}"
             return None
@@ -601,7 +609,7 @@ class ReviewScene:
         )
         self._shown_mesh[run_id] = mesh
         self.last_tune_seconds = result.seconds
-        self._plot_unit(unit_numbers(run_id, result.unit, self.slider_params()), result.seconds)
+        self._plot_unit(unit_numbers(run_id, result.unit, params), result.seconds)
         return result.seconds
 
     def _on_run_chosen(self) -> None:
