@@ -139,17 +139,20 @@ def test_a_component_longer_than_the_limit_keeps_the_label_of_its_shape() -> Non
 
 def test_the_crops_of_one_component_do_not_overrule_another() -> None:
     """A rail (component 0, 10 slices, its crops not sure but guardrail) and a bracket's piece
-    inside its cross-section (component 1, slices 3-5, its crops saying other). The piece is
-    other, its middle slice not filled though it lies inside the rail's run; the rail keeps its
-    label."""
+    inside its cross-section (component 1, slices 3-5, its crops saying other). Without the
+    infill of a railing the piece is other, its middle slice not filled though it lies inside
+    the rail's run; the rail keeps its label. With it, the piece lies wholly inside the rail's
+    slices and is guardrail whatever its crops say."""
     bracket = (2.02, 2.08, 0.5, 0.6)
     segments = extents(*run(range(10)), *run(range(3, 6), bracket), component=[0] * 10 + [1] * 3)
     labels = np.ones(13, bool)
     labels[11] = False
     crops = np.r_[np.full(10, 0.6), 0.1, 0.2, 0.05]
-    assert correct_labels(labels, segments).all()  # without crops: the piece's hole is filled
-    corrected = correct_labels(labels, segments, crop_probability=crops)
+    no_infill = CorrectionParams(infill_max_slices=0)
+    assert correct_labels(labels, segments, no_infill).all()  # without crops: the hole is filled
+    corrected = correct_labels(labels, segments, no_infill, crop_probability=crops)
     np.testing.assert_array_equal(corrected, np.r_[np.ones(10, bool), False, False, False])
+    assert correct_labels(labels, segments, crop_probability=crops).all()
 
 
 @pytest.mark.parametrize("seed", [70, 71])
@@ -877,3 +880,87 @@ def test_raw_labels_beyond_the_reach_do_not_change_a_corrected_label(
         behind += int((corrected != correct_labels(labels, ext, no_behind))[core].sum())
     assert corrections > 20  # the fixture exercises the rules
     assert behind > 5  # the rule of what stands behind a rail among them
+
+
+#: A pipe railing's slice: its rails and posts, 0.2-0.95 m high, 8 cm across.
+RAILING = (2.0, 2.08, 0.2, 0.95)
+#: An arch between its rails, a thin pipe whose hits the wireframe did not link to them.
+ARCH = (2.02, 2.05, 0.4, 0.8)
+
+
+def railing_and(piece=ARCH, piece_slices=range(4, 6), railing_slices=range(10), railing=RAILING):
+    """A railing (component 0, called guardrail) and a piece in some of its slices
+    (component 1, called other with P 0.01, its crops saying other): raw labels, extents, the
+    segment head's probabilities and the crops' probabilities."""
+    k, m = len(railing_slices), len(piece_slices)
+    segments = extents(
+        *run(railing_slices, railing), *run(piece_slices, piece), component=[0] * k + [1] * m
+    )
+    labels = np.r_[np.ones(k, bool), np.zeros(m, bool)]
+    probability = np.r_[np.full(k, 0.99), np.full(m, 0.01)]
+    crops = np.r_[np.full(k, 0.9), np.full(m, 0.02)]
+    return labels, segments, probability, crops
+
+
+def test_a_short_piece_inside_a_railings_slices_becomes_guardrail() -> None:
+    """However sure the classifier and the crops are that it is other: one that never saw the
+    design's arches judges them as short pieces of their own."""
+    labels, segments, probability, crops = railing_and()
+    corrected = correct_labels(labels, segments, probability=probability, crop_probability=crops)
+    assert corrected.all()
+    off = CorrectionParams(infill_max_slices=0)
+    corrected = correct_labels(labels, segments, off, probability, crops)
+    np.testing.assert_array_equal(corrected, labels)
+
+
+@pytest.mark.parametrize(
+    "case",
+    [
+        {"piece": (2.0, 2.4, 0.4, 0.8)},  # a shrub reaching behind the railing
+        {"piece": (1.7, 2.05, 0.4, 0.8)},  # or in front of it
+        {"piece": (2.02, 2.05, 0.4, 1.3)},  # above its top
+        {"piece": (2.02, 2.05, 0.0, 0.6)},  # down to the ground: a curb, a post's own foot
+        {"piece_slices": range(1, 8)},  # a component longer than infill_max_slices
+        {"railing_slices": range(3, 6)},  # a railing of fewer than behind_front_min_slices
+        {"railing": (2.0, 2.3, 0.0, 0.95)},  # a beam's slice with its posts: no infill
+    ],
+)
+def test_what_is_not_inside_a_railings_slices_stays_other(case) -> None:
+    labels, segments, probability, crops = railing_and(**case)
+    corrected = correct_labels(labels, segments, probability=probability, crop_probability=crops)
+    np.testing.assert_array_equal(corrected[-len(case.get("piece_slices", range(4, 6))) :], False)
+
+
+def test_a_piece_inside_a_railing_called_other_stays_other() -> None:
+    labels, segments, probability, crops = railing_and()
+    labels[:10] = False
+    assert not correct_labels(labels, segments, probability=probability).any()
+
+
+@pytest.mark.parametrize("seed", [74, 75])
+def test_the_infill_beyond_the_reach_does_not_change_a_corrected_label(seed: int) -> None:
+    """Short pieces inside long rails, raw labels drawn again beyond the reach."""
+    params = CorrectionParams()
+    reach = correction_reach_slices(params)
+    rng = np.random.default_rng(seed)
+    n = 900
+    slices = rng.integers(0, 140, n)
+    kind = rng.integers(0, 2, n)
+    component = kind * 1000 + slices // np.array([3, 200])[kind]
+    box = np.where(kind[:, None] == 0, ARCH, RAILING) + rng.uniform(-0.02, 0.02, (n, 4))
+    ext = extents(*zip(slices.tolist(), map(tuple, box), strict=True), component=component)
+    core = (slices >= 60) & (slices < 80)
+    near = (slices >= 60 - reach) & (slices < 80 + reach)
+    off = CorrectionParams(infill_max_slices=0)
+    probability = np.where(kind == 0, 0.01, 0.9)  # the pieces too sure to be filled as holes
+    filled = 0
+    for _ in range(20):
+        labels = rng.random(n) < np.where(kind == 0, 0.1, 0.7)
+        corrected = correct_labels(labels, ext, params, probability)
+        beyond = labels.copy()
+        beyond[~near] = rng.random(int((~near).sum())) < 0.7
+        np.testing.assert_array_equal(
+            correct_labels(beyond, ext, params, probability)[core], corrected[core]
+        )
+        filled += int((corrected != correct_labels(labels, ext, off, probability))[core].sum())
+    assert filled > 20  # the fixture exercises the infill

@@ -532,8 +532,8 @@ def test_a_run_from_before_the_rules_of_long_objects_and_stubs_is_predicted_with
     run_copy: Path,
 ) -> None:
     """A run whose correction parameters predate the rules of a long object's pieces (a few
-    slices called guardrail, a short piece within its outline), of posts' stubs and of a hedge
-    grown into a rail's back is re-predicted without them."""
+    slices called guardrail, a short piece within its outline), of posts' stubs, of a hedge
+    grown into a rail's back and of a railing's infill is re-predicted without them."""
     from guardrail_core.review.training import _run_correction
 
     info_path = run_copy / "run.json"
@@ -549,6 +549,7 @@ def test_a_run_from_before_the_rules_of_long_objects_and_stubs_is_predicted_with
         "post_stub_gap_m",
         "post_stub_min_top_m",
         "behind_own_wide_m",
+        "infill_max_slices",
     ):
         info["params"]["correction"].pop(name)
     info_path.write_text(json.dumps(info))
@@ -558,6 +559,7 @@ def test_a_run_from_before_the_rules_of_long_objects_and_stubs_is_predicted_with
         inside_max_slices=0,
         post_stub_gap_m=0.0,
         behind_own_wide_m=float("inf"),
+        infill_max_slices=0,
     )
 
 

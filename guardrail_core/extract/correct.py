@@ -14,7 +14,9 @@ pieces that look like a pipe rail, and the crops of them show the mesh. The wire
 speak too: a few slices of a long object called other are part of it (a fence, a wall, a strip
 of grass), and so is a short piece lying within the outline of a thin one (a fence's wire row).
 A hedge grown into a rail's back is of the rail's component; cut from the rail's slices, what
-stands behind the rail and is wider than any of its own parts is other too.
+stands behind the rail and is wider than any of its own parts is other too. And a short piece
+lying wholly inside a rail's slice is of the railing: the arches and stays between its rails,
+thin pipes whose sparse hits the wireframe leaves apart from them.
 """
 
 from __future__ import annotations
@@ -271,6 +273,33 @@ class CorrectionParams(StageParams):
         doc="and the classifier is this sure that segment is other (P(guardrail) under this)",
     )
 
+    infill_max_slices: int = param(
+        6,
+        ge=0,
+        le=1000,
+        doc="an other segment of a wireframe component spanning at most this many slices (3 m "
+        "in 0.5 m slices) that lies within the lateral and height extent (widened by "
+        "fill_margin_m) of a thin guardrail segment (infill_host_max_width_m) of another "
+        "component in its slice, in a run spanning at least behind_front_min_slices, becomes "
+        "guardrail, whatever the classifier said: the arches, stays and diagonals between a "
+        "railing's rails, thin pipes whose sparse hits the wireframe does not link to the "
+        "rails, are pieces of a few slices the classifier judges alone, and one that never saw "
+        "the design calls them other. Little else lies wholly inside a rail's slice: a hedge "
+        "or a shrub reaches behind, in front of or above it. At most the tile margin in "
+        "slices, so that a tile sees the component whole; 0 turns the rule off",
+    )
+    infill_host_max_width_m: float = param(
+        0.2,
+        unit="m",
+        ge=0,
+        finite=False,
+        doc="the guardrail segment a piece lies within spans at most this much across the path: "
+        "a pipe railing's infill lies in the plane of its rails, and its slice, rails and "
+        "posts, is thin; a beam's slice with its posts and blockouts is wider and holds no "
+        "infill, and what lies within it is a bicycle rack's bar behind the beam or a point "
+        "of the sidewalk under it; inf: any width",
+    )
+
     def check_relations(self) -> None:
         if np.isfinite(self.behind_gap_m) and self.behind_gap_m >= self.behind_max_m:
             self.fail(
@@ -310,8 +339,9 @@ def correction_reach_slices(params: CorrectionParams = CorrectionParams()) -> in
     away, at neighbours standing behind no run in front, which is settled within ``f`` slices;
     whether a run spans ``m`` slices is settled within ``m`` slices (a run that leaves them
     already spans more); the two-slice fill looks a further run test and two slices beyond; the
-    isolation test of the filled labels ``m`` more; whether a run in front spans ``f`` slices
-    ``f`` more; the second isolation test ``m`` more: ``3 m + 2 f + 3`` in all. The crop veto
+    isolation test of the filled labels ``m`` more; the infill (:func:`_infill`), whether its
+    host's run spans ``f`` slices, ``f`` more; whether a run in front spans ``f`` slices ``f``
+    more; the second isolation test ``m`` more: ``3 m + 3 f + 3`` in all. The crop veto
     (:func:`_crops_say_other`) makes a raw label depend on the crops of its component within
     ``crop_veto_max_slices`` slices (whether the component spans more is settled that far),
     and the rule of a long object's few slices (:func:`_pieces_of_other_objects`) on the raw
@@ -319,7 +349,7 @@ def correction_reach_slices(params: CorrectionParams = CorrectionParams()) -> in
     short piece within a fence's outline (:func:`_inside_other_objects`) depends on the labels
     of its own slice alone.
     """
-    rules = 3 * params.min_run_slices + 2 * params.behind_front_min_slices + 3
+    rules = 3 * params.min_run_slices + 3 * params.behind_front_min_slices + 3
     return rules + max(params.crop_veto_max_slices, params.object_window_slices)
 
 
@@ -631,8 +661,18 @@ def _inside_other_objects(
         & (width <= params.inside_host_max_width_m)
         & (probability < params.inside_host_max_probability)
     )
+    return _within_in_slice(piece, host, extents, params.fill_margin_m)
+
+
+def _within_in_slice(
+    piece: np.ndarray, host: np.ndarray, extents: SegmentExtents, margin: float
+) -> np.ndarray:
+    """(S,) bool: the ``piece`` segments (S,) bool lying within the lateral and height extent,
+    widened by ``margin`` (metres), of a ``host`` segment (S,) bool of another wireframe
+    component in their slice."""
+    out = np.zeros(len(piece), bool)
     if not piece.any() or not host.any():
-        return np.zeros(n, bool)
+        return out
     slice_index = np.asarray(extents.slice_index, np.int64)
     component = np.asarray(extents.component)
     lateral = np.asarray(extents.lateral, np.float64)
@@ -644,7 +684,6 @@ def _inside_other_objects(
     hi = np.searchsorted(slice_index[hosts], slice_index[pieces], side="right")
     owner, position = _expand_ranges(lo, hi)
     a, b = pieces[owner], hosts[position]
-    margin = params.fill_margin_m
     within = (
         (component[a] != component[b])
         & (lateral[a, 0] >= lateral[b, 0] - margin)
@@ -652,9 +691,28 @@ def _inside_other_objects(
         & (height[a, 0] >= height[b, 0] - margin)
         & (height[a, 1] <= height[b, 1] + margin)
     )
-    out = np.zeros(n, bool)
     out[a[within]] = True
     return out
+
+
+def _infill(
+    labels: np.ndarray, pairs: np.ndarray, extents: SegmentExtents, params: CorrectionParams
+) -> np.ndarray:
+    """(S,) bool: other segments of short components (``infill_max_slices``) lying within the
+    extent, widened by ``fill_margin_m``, of a guardrail segment of another component in their
+    slice, at most ``infill_host_max_width_m`` across, in a run spanning
+    ``behind_front_min_slices`` or more."""
+    if params.infill_max_slices == 0 or len(labels) == 0:
+        return np.zeros(len(labels), bool)
+    slice_index = np.asarray(extents.slice_index, np.int64)
+    piece = ~labels & (_component_spans(extents) <= params.infill_max_slices)
+    width = np.diff(np.asarray(extents.lateral, np.float64), axis=1)[:, 0]
+    host = (
+        labels
+        & (width <= params.infill_host_max_width_m)
+        & (_run_span(labels, pairs, slice_index) >= params.behind_front_min_slices)
+    )
+    return _within_in_slice(piece, host, extents, params.fill_margin_m)
 
 
 def _crops_say_other(
@@ -776,6 +834,8 @@ def correct_labels(
     # misclassified segment next to a run's end does not leave the end segment isolated.
     span = _run_span(labels, pairs, slice_index)
     labels[labels & (span < params.min_run_slices)] = False
+    # Beyond the paper: a short piece wholly inside a rail's slice is the railing's infill.
+    labels |= _infill(labels, pairs, extents, params)
 
     # What stands behind a run of another object is not guardrail, nor what stands behind its
     # own rail wider than any of a rail's parts; what it leaves of a run too short is isolated.

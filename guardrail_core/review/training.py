@@ -737,8 +737,9 @@ def _run_correction(run: Run) -> CorrectionParams:
     alone, one from before the rule of what stands behind a rail kept it, one from before
     wide segments touching a rail's back kept them, one from before the crop veto kept
     short components whatever their crops said, one from before the rules of long objects
-    kept their pieces called guardrail, one from before posts' stubs left them other, and one
-    from before the rule of a hedge grown into a rail's back kept it."""
+    kept their pieces called guardrail, one from before posts' stubs left them other, one
+    from before the rule of a hedge grown into a rail's back kept it, and one from before the
+    infill of a railing left the short pieces inside its slices as the classifier called them."""
     before = {
         "fill_min_probability": 0.0,
         "behind_gap_m": float("inf"),
@@ -748,6 +749,7 @@ def _run_correction(run: Run) -> CorrectionParams:
         "inside_max_slices": 0,
         "post_stub_gap_m": 0.0,
         "behind_own_wide_m": float("inf"),
+        "infill_max_slices": 0,
     }
     stored = {**before, **(run.info.params.get("correction") or {})}
     known = CorrectionParams.__dataclass_fields__
