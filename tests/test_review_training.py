@@ -550,6 +550,7 @@ def test_a_run_from_before_the_rules_of_long_objects_and_stubs_is_predicted_with
         "post_stub_min_top_m",
         "behind_own_wide_m",
         "infill_max_slices",
+        "infill_host_max_width_m",
     ):
         info["params"]["correction"].pop(name)
     info_path.write_text(json.dumps(info))

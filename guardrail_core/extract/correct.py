@@ -696,21 +696,21 @@ def _within_in_slice(
 
 
 def _infill(
-    labels: np.ndarray, pairs: np.ndarray, extents: SegmentExtents, params: CorrectionParams
+    labels: np.ndarray, span: np.ndarray, extents: SegmentExtents, params: CorrectionParams
 ) -> np.ndarray:
     """(S,) bool: other segments of short components (``infill_max_slices``) lying within the
     extent, widened by ``fill_margin_m``, of a guardrail segment of another component in their
     slice, at most ``infill_host_max_width_m`` across, in a run spanning
-    ``behind_front_min_slices`` or more."""
+    ``behind_front_min_slices`` or more (``span`` (S,): each guardrail segment's run, from
+    :func:`_run_span`)."""
     if params.infill_max_slices == 0 or len(labels) == 0:
         return np.zeros(len(labels), bool)
-    slice_index = np.asarray(extents.slice_index, np.int64)
     piece = ~labels & (_component_spans(extents) <= params.infill_max_slices)
     width = np.diff(np.asarray(extents.lateral, np.float64), axis=1)[:, 0]
     host = (
         labels
         & (width <= params.infill_host_max_width_m)
-        & (_run_span(labels, pairs, slice_index) >= params.behind_front_min_slices)
+        & (span >= params.behind_front_min_slices)
     )
     return _within_in_slice(piece, host, extents, params.fill_margin_m)
 
@@ -834,8 +834,9 @@ def correct_labels(
     # misclassified segment next to a run's end does not leave the end segment isolated.
     span = _run_span(labels, pairs, slice_index)
     labels[labels & (span < params.min_run_slices)] = False
-    # Beyond the paper: a short piece wholly inside a rail's slice is the railing's infill.
-    labels |= _infill(labels, pairs, extents, params)
+    # Beyond the paper: a short piece wholly inside a rail's slice is the railing's infill (the
+    # runs left keep their spans: what the isolation test took were runs of their own).
+    labels |= _infill(labels, span, extents, params)
 
     # What stands behind a run of another object is not guardrail, nor what stands behind its
     # own rail wider than any of a rail's parts; what it leaves of a run too short is isolated.
