@@ -318,6 +318,10 @@ def main() -> int:
     if args.json:
         print(json.dumps({"target_guardrail_f": TARGET_F, "designs": rows}, indent=1))
         return 0
+    # The setting is printed with the figures: a run without --feature-dropout 0.1 once read as
+    # a fresh clone not reproducing the README's tables (2026-12-03).
+    draws = ",".join(str(k) for k in args.draws) if args.recipe == "pool" else "-"
+    print(f"recipe {args.recipe}, draws {draws}, feature dropout {head.feature_dropout:g}")
     print(
         f"{'left out':18s}{'guardrail n':>12s}{'recall':>8s}{'precision':>10s}{'F':>7s}"
         f"{'other F':>9s}  draws"
