@@ -318,8 +318,7 @@ def main() -> int:
     if args.json:
         print(json.dumps({"target_guardrail_f": TARGET_F, "designs": rows}, indent=1))
         return 0
-    # The setting is printed with the figures: a run without --feature-dropout 0.1 once read as
-    # a fresh clone not reproducing the README's tables (2026-12-03).
+    # The setting goes with the figures, so a table is never read as another setting's.
     draws = ",".join(str(k) for k in args.draws) if args.recipe == "pool" else "-"
     print(f"recipe {args.recipe}, draws {draws}, feature dropout {head.feature_dropout:g}")
     print(
