@@ -4,7 +4,7 @@ Usage::
 
     .venv/bin/python benchmarks/accuracy_lodo.py [--designs pipe_verticals,pipe_arch,...]
         [--recipe pool|three-streets] [--draws 1,2] [--data benchmarks/data/lodo]
-        [--feature-dropout 0.1] [--workers 2] [--json]
+        [--feature-dropout 0.1] [--height-jitter 0.15] [--workers 2] [--json]
 
 For each design D (default: every shipped design), with d its index among the shipped designs,
 a fast-mode model is trained without D (as ``guardrail train`` does; ``--feature-dropout`` as
@@ -16,7 +16,9 @@ its option) and tested on a random 300 m street of D alone (seed 8000 + 10 d + 5
   long, as the default model's 150 m drives (``--long-runs 0.35``), in eight pairs: the first
   street of a pair holds a random half of the shipped designs, the second the other half. D is
   missing from exactly one street of each pair, and the model is trained on those eight
-  (1,200 m). Each pool street's segments are cut and its crops embedded once, for the five
+  (1,200 m). ``--height-jitter S`` builds each pool run up to S taller or lower than its
+  design (``guardrail simulate --height-jitter``; a pool of its own on disk); the test streets
+  stay as designed. Each pool street's segments are cut and its crops embedded once, for the five
   designs it serves. ``--draws 1,2,...`` measures each design with several pools (draw K:
   seeds 8000 + 100 K + 1 ... 16) and judges the goal on the mean F over them: with three
   streets of 150 m per model, which runs of an unseen design's cousins (side, paint,
@@ -80,11 +82,20 @@ POOL_LONG_RUNS = 0.35
 EXTRACTION_FILE = "lodo_extraction.json"
 
 
-def street(out: Path, seed: int, length: float, designs: list[str], long_runs: float = 0.0) -> Path:
+def street(
+    out: Path,
+    seed: int,
+    length: float,
+    designs: list[str],
+    long_runs: float = 0.0,
+    height_jitter: float = 0.0,
+) -> Path:
     """A random street of ``designs`` (simulated the first time)."""
     if not (out / "drive.json").is_file():
         print(f"simulating {out.name} ...", file=sys.stderr, flush=True)
-        spec = random_scene_spec(seed, length, designs=designs, long_runs=long_runs)
+        spec = random_scene_spec(
+            seed, length, designs=designs, long_runs=long_runs, height_jitter=height_jitter
+        )
         simulate_drive(spec, out, seed=seed, progress=False)
     return out
 
@@ -102,11 +113,18 @@ def pool_designs(draw: int, j: int, shipped: list[str]) -> list[str]:
     return [d for d in shipped if (d in half) == (j % 2 == 0)]
 
 
-def pool_streets(data: Path, draw: int, workers: int) -> list[tuple[Path, list[str]]]:
+def pool_tag(draw: int, height_jitter: float) -> str:
+    """The name of draw ``draw``'s pool (and of its models) built with ``height_jitter``."""
+    return f"{draw}" if height_jitter == 0 else f"{draw}_hj{height_jitter:g}"
+
+
+def pool_streets(
+    data: Path, draw: int, workers: int, height_jitter: float = 0.0
+) -> list[tuple[Path, list[str]]]:
     """Draw ``draw``'s pool: (drive folder, its designs) per street, simulated the first time,
     ``workers`` at once (a simulation runs on one core)."""
     shipped = list_designs()
-    folder = data / "pool" / f"draw{draw}"
+    folder = data / "pool" / f"draw{pool_tag(draw, height_jitter)}"
     jobs = [
         (
             folder / f"street_{pool_seed(draw, j)}",
@@ -121,7 +139,9 @@ def pool_streets(data: Path, draw: int, workers: int) -> list[tuple[Path, list[s
             max(1, workers), mp_context=multiprocessing.get_context("spawn")
         ) as pool:
             futures = [
-                pool.submit(street, out, seed, POOL_LENGTH_M, designs, POOL_LONG_RUNS)
+                pool.submit(
+                    street, out, seed, POOL_LENGTH_M, designs, POOL_LONG_RUNS, height_jitter
+                )
                 for out, seed, designs in missing
             ]
             for future in futures:
@@ -229,6 +249,7 @@ def leave_out(
     head: SegmentHeadParams,
     recipe: str,
     draw: int,
+    height_jitter: float,
 ) -> dict:
     """Train without ``design`` (``recipe``, pool ``draw``), test on a street of it alone."""
     others = [d for d in list_designs() if d != design]
@@ -236,9 +257,11 @@ def leave_out(
     folder = data / design
     if recipe == "pool":
         training = [
-            out for out, designs in pool_streets(data, draw, workers) if design not in designs
+            out
+            for out, designs in pool_streets(data, draw, workers, height_jitter)
+            if design not in designs
         ]
-        tag = f"_pool{draw}"
+        tag = f"_pool{pool_tag(draw, height_jitter)}"
     else:
         training = [
             street(folder / f"train_{base + i}", base + i, 150.0, others) for i in (1, 2, 3)
@@ -264,13 +287,17 @@ def measure(design: str, index: int, args: argparse.Namespace, head: SegmentHead
     """Every draw of one design left out, and the mean guardrail F over them."""
     draws = args.draws if args.recipe == "pool" else [0]
     rows = [
-        leave_out(design, index, args.data, args.workers, head, args.recipe, draw) for draw in draws
+        leave_out(
+            design, index, args.data, args.workers, head, args.recipe, draw, args.height_jitter
+        )
+        for draw in draws
     ]
     return {
         "design": design,
         "test_seed": FIRST_SEED + 10 * index + 5,
         "recipe": args.recipe,
         "feature_dropout": head.feature_dropout,
+        "height_jitter": args.height_jitter,
         "draws": rows,
         "guardrail_f": statistics.fmean(r["guardrail"]["f1"] for r in rows),
         "other_f": statistics.fmean(r["other"]["f1"] for r in rows),
@@ -306,8 +333,16 @@ def main() -> int:
         default=SegmentHeadParams().feature_dropout,
         help="the segment head's feature dropout (default: guardrail train's)",
     )
+    parser.add_argument(
+        "--height-jitter",
+        type=float,
+        default=0.0,
+        help="pool runs built up to this share taller or lower than designed (default 0)",
+    )
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
+    if args.height_jitter and args.recipe != "pool":
+        parser.error("--height-jitter: the pool recipe's option")
     shipped = list_designs()
     designs = args.designs.split(",") if args.designs else shipped
     unknown = sorted(set(designs) - set(shipped))
@@ -320,7 +355,10 @@ def main() -> int:
         return 0
     # The setting goes with the figures, so a table is never read as another setting's.
     draws = ",".join(str(k) for k in args.draws) if args.recipe == "pool" else "-"
-    print(f"recipe {args.recipe}, draws {draws}, feature dropout {head.feature_dropout:g}")
+    print(
+        f"recipe {args.recipe}, draws {draws}, feature dropout {head.feature_dropout:g}, "
+        f"height jitter {args.height_jitter:g}"
+    )
     print(
         f"{'left out':18s}{'guardrail n':>12s}{'recall':>8s}{'precision':>10s}{'F':>7s}"
         f"{'other F':>9s}  draws"

@@ -68,11 +68,12 @@ def test_simulate_takes_the_scanner_s_conditions_and_a_bare_roadside(tmp_path: P
     assert not kinds & {"hedge", "shrub", "tall_grass"}
     # Long runs and a street without curbs, as a motorway's shoulder.
     road = tmp_path / "road"
-    options = ["--long-runs", "1", "--curb-height", "0", "--quiet"]
+    options = ["--long-runs", "1", "--curb-height", "0", "--height-jitter", "0.15", "--quiet"]
     assert main(["simulate", str(road), *args[2:], *options]) == 0
     spec = yaml.safe_load((road / "truth" / "scene.yaml").read_text())
     assert spec["road"]["curb"] == {"height": 0.0}
     assert spec["guardrails"][0]["length"] >= 40  # the first run: the street goes on past it
+    assert all(0.85 <= g["height_scale"] <= 1.15 for g in spec["guardrails"])
     assert main(["simulate", str(tmp_path / "z"), "--long-runs", "2", "--quiet"]) == 2
     assert not (tmp_path / "z").exists()
     # A dropout out of range is named with its key, and nothing is written.

@@ -16,6 +16,7 @@ from guardrail_core.synth.designs import (
     Design,
     list_designs,
     load_design,
+    scaled_height,
     thrie_beam_section,
     w_beam_section,
 )
@@ -400,3 +401,28 @@ def test_build_guardrail_run_validates_inputs():
         build_guardrail_run(design, poles, toward, **{**kwargs, "paint": "pink"})
     with pytest.raises(ValueError, match="apart"):
         build_guardrail_run(design, poles[[0, 0]], toward[:2], **kwargs)
+
+
+@pytest.mark.parametrize("name", ["pipe_arch", "pipe_ladder", "beam_w", "beam_thrie"])
+def test_a_design_scaled_in_height_keeps_its_shape_along_and_its_kinds(name):
+    """Pipes: every height and the pole's times the factor, nothing along the unit moves;
+    beams: the pole times the factor, the plate lifted whole to a mean height times the factor."""
+    design = load_design(name)
+    assert scaled_height(design, 1.0) is design
+    tall = scaled_height(design, 1.15)
+    assert tall.pole.height == pytest.approx(1.15 * design.pole.height, abs=1e-12)
+    assert (tall.name, tall.unit_length, tall.pole.radius) == (
+        design.name,
+        design.unit_length,
+        design.pole.radius,
+    )
+    for a, b in zip(design.pipes, tall.pipes, strict=True):
+        np.testing.assert_allclose(b.points, a.points * [1.0, 1.15], atol=1e-12)
+        assert (b.kind, b.radius) == (a.kind, a.radius)
+        assert not b.points.flags.writeable
+    for a, b in zip(design.beams, tall.beams, strict=True):
+        np.testing.assert_allclose(b.section - b.section[0], a.section - a.section[0], atol=1e-12)
+        assert b.section[:, 1].mean() == pytest.approx(1.15 * a.section[:, 1].mean(), abs=1e-12)
+        assert b.section.max(axis=0)[1] < tall.pole.height + 0.05
+    with pytest.raises(SceneSpecError, match="height_scale"):
+        scaled_height(design, 0.2)

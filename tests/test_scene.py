@@ -91,6 +91,32 @@ def test_a_street_without_curbs_has_its_guardrails_at_road_level() -> None:
         random_scene_spec(1, 100.0, curb_height=-0.1)
 
 
+def test_random_streets_can_vary_the_height_of_their_guardrails() -> None:
+    """height_jitter: every run gets a height_scale 1 +- the jitter, drawn from a stream of its
+    own (the rest of the street is the seed's), and its truth posts are that much taller; 0, the
+    default, leaves every seed's street as it was."""
+    plain = [random_scene_spec(seed, 150.0) for seed in range(6)]
+    assert [random_scene_spec(seed, 150.0, height_jitter=0.0) for seed in range(6)] == plain
+    assert all("height_scale" not in g for spec in plain for g in spec["guardrails"])
+    jittered = [random_scene_spec(seed, 150.0, height_jitter=0.15) for seed in range(6)]
+    scales = np.array([g["height_scale"] for spec in jittered for g in spec["guardrails"]])
+    assert scales.min() >= 0.85 and scales.max() <= 1.15 and scales.std() > 0.05
+    for a, b in zip(plain, jittered, strict=True):
+        for g in b["guardrails"]:
+            g.pop("height_scale")
+        assert a == b
+    spec = random_scene_spec(2, 60.0, height_jitter=0.15)
+    runs = [o for o in build_scene(spec, seed=2).objects if o["kind"] == "guardrail"]
+    assert len(runs) == len(spec["guardrails"]) >= 2
+    for run, item in zip(runs, spec["guardrails"], strict=True):
+        assert run["height_scale"] == item["height_scale"]
+        designed = load_design(item["design"]).pole.height
+        for pole in run["poles"]:
+            assert pole["height"] == pytest.approx(designed * item["height_scale"], abs=1e-9)
+    with pytest.raises(SceneSpecError, match="--height-jitter"):
+        random_scene_spec(1, 100.0, height_jitter=0.6)
+
+
 def test_random_scene_is_reproducible_and_round_trips_through_yaml(tmp_path: Path) -> None:
     spec = random_scene_spec(5, 120.0)
     assert spec == random_scene_spec(5, 120.0)

@@ -103,6 +103,14 @@ def add_parser(subparsers: common.Subparsers) -> None:
         "embankments and motorways (default 0: runs of 6-24 m)",
     )
     own.add_argument(
+        "--height-jitter",
+        type=float,
+        default=0.0,
+        metavar="SHARE",
+        help="each of a random scene's guardrail runs built up to this share (0-0.5) taller or "
+        "lower than its design, as real guardrails stand (default 0: every run as designed)",
+    )
+    own.add_argument(
         "--curb-height",
         type=float,
         metavar="METRES",
@@ -134,6 +142,7 @@ def run(args: argparse.Namespace) -> int:
             (not args.roadside, "--no-roadside"),
             (args.long_runs != 0.0, "--long-runs"),
             (args.curb_height is not None, "--curb-height"),
+            (args.height_jitter != 0.0, "--height-jitter"),
         ):
             if given:
                 print(
@@ -149,6 +158,7 @@ def run(args: argparse.Namespace) -> int:
             roadside=args.roadside,
             long_runs=args.long_runs,
             curb_height=args.curb_height,
+            height_jitter=args.height_jitter,
         )
     scanner = dict(spec.get("scanner") or {})
     if args.scanner:

@@ -27,7 +27,7 @@ geometry, which decides it otherwise. Arc angles are measured from +x towards +y
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -261,6 +261,42 @@ def parse_design(raw: Any, *, source: str = "<design>", default_name: str = "des
     elif not beams:
         raise ctx.error("beams", "a beam design needs at least one beam")
     return Design(name, dtype, unit_length, pole, pipes, beams, description.strip())
+
+
+#: The range of :func:`scaled_height` factors a scene spec may ask for.
+HEIGHT_SCALE_RANGE = (0.5, 2.0)
+
+
+def scaled_height(design: Design, factor: float) -> Design:
+    """``design`` built ``factor`` times as tall: real guardrails of one design stand 0.7-1.2 m.
+
+    Pipes: every axis point's height and the pole's height times ``factor`` (a horizontal rail
+    stays horizontal, an arc becomes an elliptic arc). Beams: the pole times ``factor`` and each
+    section lifted so that its mean height is ``factor`` times as high; the plate keeps its shape,
+    as a beam of one profile is mounted higher or lower. ``factor`` 1 returns ``design`` itself.
+
+    Raises
+    ------
+    SceneSpecError
+        ``factor`` outside :data:`HEIGHT_SCALE_RANGE`.
+    """
+    lo, hi = HEIGHT_SCALE_RANGE
+    if not (isinstance(factor, int | float) and lo <= factor <= hi):
+        raise SceneSpecError(f"height_scale: {lo} to {hi}, got {factor!r}")
+    if factor == 1.0:
+        return design
+    pipes = tuple(
+        replace(p, points=_readonly(p.points * np.array([1.0, factor]))) for p in design.pipes
+    )
+    beams = tuple(
+        replace(
+            b,
+            section=_readonly(b.section + [0.0, (factor - 1.0) * float(b.section[:, 1].mean())]),
+        )
+        for b in design.beams
+    )
+    pole = replace(design.pole, height=design.pole.height * factor)
+    return replace(design, pole=pole, pipes=pipes, beams=beams)
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:

@@ -403,6 +403,7 @@ def random_scene_spec(
     roadside: bool = True,
     long_runs: float = 0.0,
     curb_height: float | None = None,
+    height_jitter: float = 0.0,
 ) -> dict:
     """A random street ``length`` metres long (plus run-in and run-out) mixing every design and kind.
 
@@ -412,7 +413,10 @@ def random_scene_spec(
     40-120 m long instead (:data:`LONG_RUN_M`; drawn from a stream of their own, so with 0 the
     street is that of the seed before this option). ``curb_height`` (m): the curbs' height
     (default the road's 0.15 m; 0: no curb, the sidewalks and guardrails at road level, as on a
-    rural road's or a motorway's shoulder).
+    rural road's or a motorway's shoulder). ``height_jitter`` (0-0.5): each run is built
+    ``1 + U(-height_jitter, height_jitter)`` times as tall as its design (``height_scale``), as real
+    guardrails of one design stand at different heights; drawn from a stream of its own, and with
+    0 no run has a ``height_scale``.
     ``roadside``: the verges get embankments, ditches, hedges, shrubs and tall grass
     (:func:`_green_roadside`), drawn from a stream of their own: the road, guardrails and other
     objects are those of the same seed without them.
@@ -421,6 +425,8 @@ def random_scene_spec(
         raise SceneSpecError(f"--length: a drive needs at least 20 m, got {length} m")
     if not 0.0 <= long_runs <= 1.0:
         raise SceneSpecError(f"--long-runs: a share from 0 to 1, got {long_runs}")
+    if not 0.0 <= height_jitter <= 0.5:
+        raise SceneSpecError(f"--height-jitter: 0 to 0.5, got {height_jitter}")
     if curb_height is not None and not 0.0 <= curb_height <= 0.5:
         raise SceneSpecError(f"--curb-height: 0 to 0.5 m, got {curb_height}")
     shipped = list_designs()
@@ -475,6 +481,7 @@ def random_scene_spec(
 
     queue = [str(d) for d in rng.permutation(design_pool)]
     run_lengths = np.random.default_rng([seed, 22])  # a stream of its own, as the roadside's
+    run_heights = np.random.default_rng([seed, 23])
     kinds = [str(k) for k in rng.permutation(CONFOUNDER_KINDS)]
     guardrails: list[dict] = []
     objects: list[dict] = []
@@ -514,6 +521,9 @@ def random_scene_spec(
                         "paint": str(rng.choice(list(PAINTS))),
                     }
                 )
+                if height_jitter > 0:
+                    scale = 1.0 + run_heights.uniform(-height_jitter, height_jitter)
+                    guardrails[-1]["height_scale"] = round(float(scale), 3)
             gap_start = s + run + 1.0
             gap = float(rng.uniform(6, 18))
             # Curb-side objects stand in the gaps between runs; others anywhere along the side.

@@ -17,7 +17,7 @@ import numpy as np
 
 from guardrail_core.errors import SceneSpecError
 from guardrail_core.synth.confounders import CONFOUNDER_KINDS, build_confounder
-from guardrail_core.synth.designs import Design, load_design
+from guardrail_core.synth.designs import Design, load_design, scaled_height
 from guardrail_core.synth.guardrail import build_guardrail_run
 from guardrail_core.synth.mesh import MeshBuilder, SceneMesh
 from guardrail_core.synth.random_streams import child_rng
@@ -81,7 +81,8 @@ def guardrail_parts(items: list, road: Road, seed: int, first_id: int) -> list[S
         where = f"guardrails[{i}]"
         if not isinstance(item, dict):
             raise SceneSpecError(f"{where}: expected a mapping")
-        design = load_design(spec_value(item, "design", str, where))
+        height_scale = spec_value(item, "height_scale", float, where, 1.0)
+        design = scaled_height(load_design(spec_value(item, "design", str, where)), height_scale)
         run = _GuardrailRun(
             road=road,
             seed=seed,
@@ -89,6 +90,7 @@ def guardrail_parts(items: list, road: Road, seed: int, first_id: int) -> list[S
             item=item,
             where=where,
             design=design,
+            height_scale=height_scale,
             side=spec_side(item, where),
             offset=spec_value(item, "offset", float, where, 0.35),
             start=spec_value(item, "start", float, where),
@@ -187,7 +189,8 @@ class _GuardrailRun:
     object_id: int
     item: dict
     where: str
-    design: Design
+    design: Design  # already scaled by height_scale
+    height_scale: float
     side: str
     offset: float
     start: float
@@ -210,6 +213,8 @@ class _GuardrailRun:
                 "pole_spacing": self.spacing,
             }
         )
+        if self.height_scale != 1.0:  # only then: a drive of unscaled designs keeps its truth
+            record["height_scale"] = self.height_scale
         return record
 
 
