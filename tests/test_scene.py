@@ -115,6 +115,9 @@ def test_random_streets_can_vary_the_height_of_their_guardrails() -> None:
             assert pole["height"] == pytest.approx(designed * item["height_scale"], abs=1e-9)
     with pytest.raises(SceneSpecError, match="--height-jitter"):
         random_scene_spec(1, 100.0, height_jitter=0.6)
+    spec["guardrails"][1]["height_scale"] = 3.0
+    with pytest.raises(SceneSpecError, match=r"guardrails\[1\]\.height_scale: 0.5 to 2.0"):
+        build_scene(spec, seed=2)
 
 
 def test_random_scene_is_reproducible_and_round_trips_through_yaml(tmp_path: Path) -> None:

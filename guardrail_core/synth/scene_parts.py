@@ -81,8 +81,12 @@ def guardrail_parts(items: list, road: Road, seed: int, first_id: int) -> list[S
         where = f"guardrails[{i}]"
         if not isinstance(item, dict):
             raise SceneSpecError(f"{where}: expected a mapping")
+        design = load_design(spec_value(item, "design", str, where))
         height_scale = spec_value(item, "height_scale", float, where, 1.0)
-        design = scaled_height(load_design(spec_value(item, "design", str, where)), height_scale)
+        try:
+            design = scaled_height(design, height_scale)
+        except SceneSpecError as exc:
+            raise SceneSpecError(f"{where}.{exc}") from None
         run = _GuardrailRun(
             road=road,
             seed=seed,
