@@ -3,7 +3,7 @@
 Usage::
 
     .venv/bin/python benchmarks/accuracy_lodo.py [--designs pipe_verticals,pipe_arch,...]
-        [--recipe pool|three-streets] [--draws 1,2] [--data benchmarks/data/lodo]
+        [--recipe pool|three-streets] [--draws 1,2|1+2] [--data benchmarks/data/lodo]
         [--feature-dropout 0.1] [--height-jitter 0.15] [--workers 2] [--json]
 
 For each design D (default: every shipped design), with d its index among the shipped designs,
@@ -22,7 +22,10 @@ its option) and tested on a random 300 m street of D alone (seed 8000 + 10 d + 5
   designs it serves. ``--draws 1,2,...`` measures each design with several pools (draw K:
   seeds 8000 + 100 K + 1 ... 16) and judges the goal on the mean F over them: with three
   streets of 150 m per model, which runs of an unseen design's cousins (side, paint,
-  length) a draw held moved its F by up to 0.2 (README, leave one design out).
+  length) a draw held moved its F by up to 0.2 (README, leave one design out). Pools joined
+  by ``+`` train one model together: ``--draws 1+2`` trains on both pools' eight streets
+  without D (16 streets, 2,400 m, as many metres of camera streets as the default model's
+  twelve drives), its models kept apart on disk (``model_pool1+2``).
 - ``three-streets`` (the recipe of the README's earlier tables): three random 150 m streets of
   every design but D (seeds 8000 + 10 d + 1, 2, 3, ``--designs <all but D>``).
 
@@ -113,9 +116,11 @@ def pool_designs(draw: int, j: int, shipped: list[str]) -> list[str]:
     return [d for d in shipped if (d in half) == (j % 2 == 0)]
 
 
-def pool_tag(draw: int, height_jitter: float) -> str:
-    """The name of draw ``draw``'s pool (and of its models) built with ``height_jitter``."""
-    return f"{draw}" if height_jitter == 0 else f"{draw}_hj{height_jitter:g}"
+def pool_tag(draws: tuple[int, ...], height_jitter: float) -> str:
+    """The name of the pool of ``draws`` (one draw, or several joined: ``1+2``) built with
+    ``height_jitter``, and of the models trained on it."""
+    name = "+".join(str(k) for k in draws)
+    return name if height_jitter == 0 else f"{name}_hj{height_jitter:g}"
 
 
 def pool_streets(
@@ -124,7 +129,7 @@ def pool_streets(
     """Draw ``draw``'s pool: (drive folder, its designs) per street, simulated the first time,
     ``workers`` at once (a simulation runs on one core)."""
     shipped = list_designs()
-    folder = data / "pool" / f"draw{pool_tag(draw, height_jitter)}"
+    folder = data / "pool" / f"draw{pool_tag((draw,), height_jitter)}"
     jobs = [
         (
             folder / f"street_{pool_seed(draw, j)}",
@@ -147,6 +152,19 @@ def pool_streets(
             for future in futures:
                 future.result()
     return [(out, designs) for out, _, designs in jobs]
+
+
+def pool_training(
+    data: Path, design: str, draws: tuple[int, ...], workers: int, height_jitter: float
+) -> list[Path]:
+    """The streets a model without ``design`` trains on: those of the pools ``draws`` that lack
+    it (one of each pair: 8 streets per pool)."""
+    return [
+        out
+        for draw in draws
+        for out, designs in pool_streets(data, draw, workers, height_jitter)
+        if design not in designs
+    ]
 
 
 def street_set(drive: Path, crop_size: int) -> TrainingSet:
@@ -248,20 +266,17 @@ def leave_out(
     workers: int,
     head: SegmentHeadParams,
     recipe: str,
-    draw: int,
+    draws: tuple[int, ...],
     height_jitter: float,
 ) -> dict:
-    """Train without ``design`` (``recipe``, pool ``draw``), test on a street of it alone."""
+    """Train without ``design`` (``recipe``, the pools ``draws`` together), test on a street of
+    it alone."""
     others = [d for d in list_designs() if d != design]
     base = FIRST_SEED + 10 * index
     folder = data / design
     if recipe == "pool":
-        training = [
-            out
-            for out, designs in pool_streets(data, draw, workers, height_jitter)
-            if design not in designs
-        ]
-        tag = f"_pool{pool_tag(draw, height_jitter)}"
+        training = pool_training(data, design, draws, workers, height_jitter)
+        tag = f"_pool{pool_tag(draws, height_jitter)}"
     else:
         training = [
             street(folder / f"train_{base + i}", base + i, 150.0, others) for i in (1, 2, 3)
@@ -276,7 +291,7 @@ def leave_out(
     process_drive_folder(test, model_dir, run, cluster=ClusterSpec(workers=workers))
     detection = evaluate_run_folder(test, run).detection
     return {
-        "draw": draw if recipe == "pool" else None,
+        "pools": list(draws) if recipe == "pool" else None,
         "train_seeds": [int(path.name.split("_")[-1]) for path in training],
         "guardrail": detection.guardrail.to_json(),
         "other": detection.other.to_json(),
@@ -285,7 +300,7 @@ def leave_out(
 
 def measure(design: str, index: int, args: argparse.Namespace, head: SegmentHeadParams) -> dict:
     """Every draw of one design left out, and the mean guardrail F over them."""
-    draws = args.draws if args.recipe == "pool" else [0]
+    draws = args.draws if args.recipe == "pool" else [(0,)]
     rows = [
         leave_out(
             design, index, args.data, args.workers, head, args.recipe, draw, args.height_jitter
@@ -304,14 +319,20 @@ def measure(design: str, index: int, args: argparse.Namespace, head: SegmentHead
     }
 
 
-def draw_list(text: str) -> list[int]:
-    """``--draws``: comma-separated pools, 1 to 9 (each has seeds 8000 + 100 K + 1..16)."""
+def draw_list(text: str) -> list[tuple[int, ...]]:
+    """``--draws``: comma-separated models, each trained on one pool (1 to 9; pool K has seeds
+    8000 + 100 K + 1..16) or on several joined by ``+`` (``1+2``: both pools' streets without
+    the design, 16 of 150 m)."""
     try:
-        draws = [int(k) for k in text.split(",")]
+        draws = [tuple(int(k) for k in model.split("+")) for model in text.split(",")]
     except ValueError:
-        raise argparse.ArgumentTypeError(f"comma-separated pools 1 to 9, got {text!r}") from None
-    if not draws or any(not 1 <= k <= 9 for k in draws):
+        raise argparse.ArgumentTypeError(
+            f"comma-separated pools 1 to 9 (or pools joined by +), got {text!r}"
+        ) from None
+    if not draws or any(not 1 <= k <= 9 for model in draws for k in model):
         raise argparse.ArgumentTypeError(f"pools 1 to 9, got {text!r}")
+    if any(len(set(model)) < len(model) for model in draws):
+        raise argparse.ArgumentTypeError(f"a pool joined to itself: {text!r}")
     return draws
 
 
@@ -322,8 +343,9 @@ def main() -> int:
     parser.add_argument(
         "--draws",
         type=draw_list,
-        default=[1],
-        help="the pools to train on, comma-separated (pool recipe; default 1)",
+        default=[(1,)],
+        help="the pools to train on, comma-separated, each a model; pools joined by + train "
+        "one model together (pool recipe; default 1)",
     )
     parser.add_argument("--data", type=Path, default=ROOT / "benchmarks" / "data" / "lodo")
     parser.add_argument("--workers", type=int, default=2)
@@ -354,7 +376,7 @@ def main() -> int:
         print(json.dumps({"target_guardrail_f": TARGET_F, "designs": rows}, indent=1))
         return 0
     # The setting goes with the figures, so a table is never read as another setting's.
-    draws = ",".join(str(k) for k in args.draws) if args.recipe == "pool" else "-"
+    draws = ",".join(pool_tag(d, 0) for d in args.draws) if args.recipe == "pool" else "-"
     print(
         f"recipe {args.recipe}, draws {draws}, feature dropout {head.feature_dropout:g}, "
         f"height jitter {args.height_jitter:g}"

@@ -47,6 +47,22 @@ def test_each_design_misses_one_street_of_every_pair(lodo, draw: int) -> None:  
     assert not other & set(seeds)
 
 
+def test_joined_pools_train_on_the_streets_lacking_the_design(lodo, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    for draw in (1, 2):  # as if simulated: only the folders' drive.json is looked at
+        for j in range(2 * lodo.POOL_PAIRS):
+            street = tmp_path / "pool" / f"draw{draw}" / f"street_{lodo.pool_seed(draw, j)}"
+            street.mkdir(parents=True)
+            (street / "drive.json").write_text("{}")
+    design = list_designs()[0]
+    one = [lodo.pool_training(tmp_path, design, (draw,), 1, 0.0) for draw in (1, 2)]
+    both = lodo.pool_training(tmp_path, design, (1, 2), 1, 0.0)
+    assert [len(streets) for streets in one] == [lodo.POOL_PAIRS] * 2
+    assert both == one[0] + one[1]
+    for path in both:
+        draw, j = divmod(int(path.name.split("_")[1]) - lodo.FIRST_SEED - 1, 100)
+        assert design not in lodo.pool_designs(draw, j, list_designs())
+
+
 def _set(n: int, crops: list[int], group: int) -> TrainingSet:
     has_crop = np.zeros(n, bool)
     has_crop[crops] = True
@@ -119,7 +135,11 @@ def test_a_street_is_cut_once_and_again_when_cut_otherwise(
 def test_draws_are_pools_one_to_nine(lodo) -> None:  # type: ignore[no-untyped-def]
     import argparse
 
-    assert lodo.draw_list("1,2") == [1, 2]
-    for text in ("0", "10", "1,x", ""):
+    assert lodo.draw_list("1,2") == [(1,), (2,)]
+    assert lodo.draw_list("1+2,3") == [(1, 2), (3,)]  # one model on pools 1 and 2, one on 3
+    for text in ("0", "10", "1,x", "", "1+", "2+2", "1+10"):
         with pytest.raises(argparse.ArgumentTypeError):
             lodo.draw_list(text)
+    # Models of joined pools are kept apart from each pool's on disk.
+    assert lodo.pool_tag((1,), 0.0) == "1" and lodo.pool_tag((1, 2), 0.0) == "1+2"
+    assert lodo.pool_tag((1, 2), 0.15) == "1+2_hj0.15"
