@@ -140,19 +140,84 @@ def test_a_component_longer_than_the_limit_keeps_the_label_of_its_shape() -> Non
 def test_the_crops_of_one_component_do_not_overrule_another() -> None:
     """A rail (component 0, 10 slices, its crops not sure but guardrail) and a bracket's piece
     inside its cross-section (component 1, slices 3-5, its crops saying other). Without the
-    infill of a railing the piece is other, its middle slice not filled though it lies inside
-    the rail's run; the rail keeps its label. With it, the piece lies wholly inside the rail's
-    slices and is guardrail whatever its crops say."""
+    infill of a railing and the spare of what rests on a rail the piece is other, its middle
+    slice not filled though it lies inside the rail's run; the rail keeps its label. With
+    either, the piece lies wholly inside the rail's slices and is guardrail whatever its crops
+    say."""
     bracket = (2.02, 2.08, 0.5, 0.6)
     segments = extents(*run(range(10)), *run(range(3, 6), bracket), component=[0] * 10 + [1] * 3)
     labels = np.ones(13, bool)
     labels[11] = False
     crops = np.r_[np.full(10, 0.6), 0.1, 0.2, 0.05]
-    no_infill = CorrectionParams(infill_max_slices=0)
-    assert correct_labels(labels, segments, no_infill).all()  # without crops: the hole is filled
-    corrected = correct_labels(labels, segments, no_infill, crop_probability=crops)
+    neither = CorrectionParams(infill_max_slices=0, crop_veto_rest_share=np.inf)
+    assert correct_labels(labels, segments, neither).all()  # without crops: the hole is filled
+    corrected = correct_labels(labels, segments, neither, crop_probability=crops)
     np.testing.assert_array_equal(corrected, np.r_[np.ones(10, bool), False, False, False])
     assert correct_labels(labels, segments, crop_probability=crops).all()
+    no_infill = CorrectionParams(infill_max_slices=0)
+    assert correct_labels(labels, segments, no_infill, crop_probability=crops).all()
+
+
+#: A railing's lower part (posts, lower rails) 2.2 m off, and its top rail, 1.0-1.25 m up, that
+#: the wireframe keeps apart: the side camera sees the top rail as a thin strip.
+RAILING_BELOW = (2.15, 2.25, 0.11, 1.0)
+TOP_RAIL = (2.17, 2.23, 1.02, 1.25)
+
+
+def test_a_top_rail_resting_on_its_railing_is_spared_the_crop_veto() -> None:
+    """The railing (component 0, 17 slices, crops saying guardrail) and its top rail (component
+    1, the same slices, two crops saying other). The top rail rests on the railing: its crops
+    do not overrule its shape. Not spared: the rule off; the top rail beside the railing rather
+    than on it, wider than a rail, on a railing called other, on one its own crops veto, or
+    resting on it in fewer than half its slices."""
+    slices = range(17)
+    component = [0] * 17 + [1] * 17
+    labels = np.ones(34, bool)
+
+    def crops_of(railing_slices: int) -> np.ndarray:
+        """Two crops of the railing saying guardrail, two of the top rail saying other."""
+        crops = np.full(railing_slices + 17, NAN)
+        crops[[2, 3]] = 0.9
+        crops[[railing_slices + 4, railing_slices + 12]] = [0.35, 0.04]
+        return crops
+
+    crops = crops_of(17)
+    segments = extents(*run(slices, RAILING_BELOW), *run(slices, TOP_RAIL), component=component)
+    assert correct_labels(labels, segments, crop_probability=crops).all()
+    off = CorrectionParams(crop_veto_rest_share=np.inf)
+    vetoed = np.r_[np.ones(17, bool), np.zeros(17, bool)]
+    np.testing.assert_array_equal(
+        correct_labels(labels, segments, off, crop_probability=crops), vetoed
+    )
+    not_spared = {
+        "beside": extents(
+            *run(slices, RAILING_BELOW), *run(slices, (2.35, 2.4, 1.02, 1.25)), component=component
+        ),
+        "too high": extents(
+            *run(slices, RAILING_BELOW), *run(slices, (2.17, 2.23, 1.35, 1.6)), component=component
+        ),
+        "wide": extents(
+            *run(slices, RAILING_BELOW), *run(slices, (2.0, 2.25, 1.02, 1.25)), component=component
+        ),
+        "on a third of its slices": extents(
+            *run(range(6), RAILING_BELOW), *run(slices, TOP_RAIL), component=[0] * 6 + [1] * 17
+        ),
+    }
+    for name, where in not_spared.items():
+        n = len(where.slice_index)
+        corrected = correct_labels(np.ones(n, bool), where, crop_probability=crops_of(n - 17))
+        np.testing.assert_array_equal(corrected, np.arange(n) < n - 17, err_msg=name)
+    # The railing called other by its shape, or vetoed by its own crops: no rail to rest on.
+    other_below = labels.copy()
+    other_below[:17] = False
+    np.testing.assert_array_equal(
+        correct_labels(other_below, segments, crop_probability=crops), np.zeros(34, bool)
+    )
+    both_other = crops.copy()
+    both_other[[2, 3]] = 0.1
+    np.testing.assert_array_equal(
+        correct_labels(labels, segments, crop_probability=both_other), np.zeros(34, bool)
+    )
 
 
 @pytest.mark.parametrize("seed", [70, 71])

@@ -212,6 +212,20 @@ class CorrectionParams(StageParams):
         "guardrail segments of such rails)",
     )
 
+    crop_veto_rest_share: float = param(
+        0.5,
+        gt=0,
+        finite=False,
+        doc="a short component the crops say other is spared when at least this share of its "
+        "segments are thin (infill_host_max_width_m) and rest on a guardrail segment of "
+        "another component in their slice: within its lateral extent (widened by "
+        "fill_margin_m) and touch_distance_m of it in height, the host's component spanning "
+        "at least behind_front_min_slices and not vetoed itself. A railing's top rail, 1 m up, "
+        "that the wireframe keeps apart from the rest of the railing is seen by the side "
+        "camera as a thin strip, and its crops say other; a fence's wire row sits on no rail. "
+        "Above 1 (inf): none is spared",
+    )
+
     object_window_slices: int = param(
         20,
         ge=0,
@@ -344,13 +358,16 @@ def correction_reach_slices(params: CorrectionParams = CorrectionParams()) -> in
     more; the second isolation test ``m`` more: ``3 m + 3 f + 3`` in all. The crop veto
     (:func:`_crops_say_other`) makes a raw label depend on the crops of its component within
     ``crop_veto_max_slices`` slices (whether the component spans more is settled that far),
-    and the rule of a long object's few slices (:func:`_pieces_of_other_objects`) on the raw
-    labels of its component within ``object_window_slices``: the larger of the two more. A
+    and, as it may be spared for resting on a rail (:func:`_resting_on_rails`), on the
+    rail's raw labels and crops ``crop_veto_max_slices`` further (twice that in all); the rule
+    of a long object's few slices (:func:`_pieces_of_other_objects`) on the raw labels of its
+    component within ``object_window_slices``: the larger of the two more. A
     short piece within a fence's outline (:func:`_inside_other_objects`) depends on the labels
     of its own slice alone.
     """
     rules = 3 * params.min_run_slices + 3 * params.behind_front_min_slices + 3
-    return rules + max(params.crop_veto_max_slices, params.object_window_slices)
+    veto = params.crop_veto_max_slices * (2 if params.crop_veto_rest_share <= 1 else 1)
+    return rules + max(veto, params.object_window_slices)
 
 
 def neighbour_pairs(
@@ -735,6 +752,47 @@ def _crops_say_other(
     )
 
 
+def _resting_on_rails(
+    labels: np.ndarray, veto: np.ndarray, extents: SegmentExtents, params: CorrectionParams
+) -> np.ndarray:
+    """(S,) bool: the ``veto`` segments (S,) bool of components of which at least
+    ``crop_veto_rest_share`` of the segments are at most ``infill_host_max_width_m`` across and
+    lie within the lateral extent, widened by ``fill_margin_m``, and ``touch_distance_m`` in
+    height of a guardrail segment (``labels`` (S,) bool), not vetoed, of another component
+    spanning ``behind_front_min_slices`` or more in their slice."""
+    n = len(labels)
+    if not np.isfinite(params.crop_veto_rest_share) or not veto.any():
+        return np.zeros(n, bool)
+    lateral = np.asarray(extents.lateral, np.float64)
+    height = np.asarray(extents.height, np.float64)
+    piece = veto & (lateral[:, 1] - lateral[:, 0] <= params.infill_host_max_width_m)
+    host = labels & ~veto & (_component_spans(extents) >= params.behind_front_min_slices)
+    if not piece.any() or not host.any():
+        return np.zeros(n, bool)
+    slice_index = np.asarray(extents.slice_index, np.int64)
+    _, component = np.unique(np.asarray(extents.component), return_inverse=True)
+    hosts = np.flatnonzero(host)
+    hosts = hosts[np.argsort(slice_index[hosts], kind="stable")]
+    pieces = np.flatnonzero(piece)
+    lo = np.searchsorted(slice_index[hosts], slice_index[pieces], side="left")
+    hi = np.searchsorted(slice_index[hosts], slice_index[pieces], side="right")
+    owner, position = _expand_ranges(lo, hi)
+    a, b = pieces[owner], hosts[position]
+    margin = params.fill_margin_m
+    gap = np.maximum(height[a, 0] - height[b, 1], height[b, 0] - height[a, 1])
+    rests = (
+        (component[a] != component[b])
+        & (lateral[a, 0] >= lateral[b, 0] - margin)
+        & (lateral[a, 1] <= lateral[b, 1] + margin)
+        & (gap <= params.touch_distance_m)
+    )
+    resting = np.zeros(n, bool)
+    resting[a[rests]] = True
+    total = np.bincount(component)
+    share = np.bincount(component, weights=resting, minlength=len(total)) / total
+    return veto & (share[component] >= params.crop_veto_rest_share)
+
+
 def correct_labels(
     labels: np.ndarray,
     extents: SegmentExtents,
@@ -790,9 +848,11 @@ def correct_labels(
         fillable = ~(np.asarray(probability, np.float64) < params.fill_min_probability)  # NaN: yes
 
     # Beyond the paper: a short component whose crops say other is other, however its shape
-    # looks; nothing of it is filled either.
+    # looks; nothing of it is filled either. One resting on another component's rail is a
+    # railing's rail the wireframe kept apart, whose thin strip the crops misread.
     if crop_probability is not None:
         say_other = _crops_say_other(extents, np.asarray(crop_probability, np.float64), params)
+        say_other &= ~_resting_on_rails(labels, say_other, extents, params)
         labels &= ~say_other
         fillable &= ~say_other
     # Beyond the paper: a few slices of a long object called other are part of that object,
