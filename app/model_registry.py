@@ -80,8 +80,16 @@ class ModelRegistry:
         raise UnknownModelError(version)
 
     def add(self, model: GuardrailClassifier) -> Path:
-        """Save a fine-tuned model as ``folder/<version>``."""
-        return save_model(model, self.folder / model.version)
+        """Save a fine-tuned model as ``folder/<version>``.
+
+        A version names the second a model was made and a digest of its weights, so a folder
+        of that version already there holds this very model: two fine-tunings on the same
+        labels from the same start, within one second, make the same weights. It is kept, not
+        written again."""
+        folder = self.folder / model.version
+        if (folder / MODEL_FILE).is_file():
+            return folder
+        return save_model(model, folder)
 
     def fine_tuning_start(self) -> GuardrailClassifier | None:
         """The model a fine-tuning starts from: the one the active model was itself fine-tuned

@@ -35,3 +35,14 @@ def test_a_fine_tuned_model_active_leads_back_to_its_start(tmp_path: Path) -> No
     # A model trained from drives has no start of its own: it is the start.
     own = _registry(tmp_path / "models", shipped.version, DEFAULT_MODEL_DIR).fine_tuning_start()
     assert own is not None and own.version == shipped.version
+
+
+def test_the_same_model_added_twice_is_one_folder(tmp_path: Path) -> None:
+    # Two fine-tunings on the same labels from the same start within one second make the same
+    # weights, so the same version: the second one is that model, not a clash.
+    tuned = load_model(DEFAULT_MODEL_DIR)
+    registry = _registry(tmp_path / "models", tuned.version)
+    first = registry.add(tuned)
+    assert registry.add(tuned) == first
+    assert load_model(first).version == tuned.version
+    assert sorted(p.name for p in (tmp_path / "models").iterdir()) == [tuned.version]
