@@ -222,16 +222,20 @@ def joined(sets: list[TrainingSet]) -> TrainingSet:
 
 
 def trained_with(model_dir: Path, head: SegmentHeadParams) -> bool:
-    """Whether the model in ``model_dir`` has a segment head trained with ``head``, on segments
-    cut with today's extraction parameters (a model from before :data:`EXTRACTION_FILE` was
-    written is trained again: its segments may have been cut otherwise)."""
+    """Whether the model in ``model_dir`` has a segment head trained with ``head`` on today's
+    segment features, on segments cut with today's extraction parameters (a model from before
+    :data:`EXTRACTION_FILE` was written is trained again: its segments may have been cut
+    otherwise)."""
     path = model_dir / "model.json"
     extraction = model_dir / EXTRACTION_FILE
     if not path.is_file() or not extraction.is_file():
         return False
     if json.loads(extraction.read_text()) != ExtractionParams().to_json():
         return False
-    saved = json.loads(path.read_text()).get("segment_head", {}).get("params", {})
+    document = json.loads(path.read_text()).get("segment_head", {})
+    if document.get("features") != list(head.feature_names()):  # features renamed or redefined
+        return False
+    saved = document.get("params", {})
     saved.setdefault("feature_dropout", 0.0)  # models from before it was a parameter had none
     return SegmentHeadParams.from_json(saved) == head
 

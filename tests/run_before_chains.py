@@ -8,16 +8,10 @@ from pathlib import Path
 
 import numpy as np
 
-from guardrail_core.extract.shape_features import (
-    NEIGHBOUR_FEATURE_NAMES,
-    SHAPE_FEATURE_NAMES,
-    feature_columns,
-)
+from guardrail_core.extract.shape_features import NAMES_BEFORE_CHAINS, feature_columns
 
 #: The feature columns a run folder held before chains, in order.
-BEFORE = [
-    name.replace("chain", "component") for name in SHAPE_FEATURE_NAMES + NEIGHBOUR_FEATURE_NAMES
-]
+BEFORE = list(NAMES_BEFORE_CHAINS)
 
 
 def copy_run_before_chains(run_path: Path, folder: Path) -> np.ndarray:

@@ -146,12 +146,46 @@ def test_a_rail_keeps_its_own_chain_features_beside_the_hedge_its_component_hold
     f = {name: table[:, i] for i, name in enumerate(SHAPE_FEATURE_NAMES)}
     rail = np.isin(np.arange(len(segments)), segments.point_segment[:500])
     assert rail.sum() == 10 and len(segments) > 20  # the hedge is cut into pieces too
-    np.testing.assert_allclose(f["chain_height_max_m"][rail], 0.7)
+    np.testing.assert_allclose(f["chain_height_top_m"][rail], 0.7)
     np.testing.assert_allclose(f["chain_log_slices"][rail], np.log(10))
     np.testing.assert_allclose(f["chain_log_length_m"][rail], np.log1p(4.99), atol=1e-9)
     np.testing.assert_allclose(f["chain_lateral_spread_m"][rail], 0.0, atol=1e-6)
-    assert np.all(f["chain_height_max_m"][~rail] > 1.75)
+    assert np.all(f["chain_height_top_m"][~rail] > 1.75)
     assert np.all(f["chain_height_min_m"][~rail] < 0.05)
+
+
+def test_a_shrub_grown_into_a_rail_does_not_raise_the_rails_chain_top() -> None:
+    # One component: a 5 m rail 3 m left at 0.7 m, and a shrub 0-1.8 m tall touching it from
+    # behind over 1 m (slices 4 and 5), so those two slices' segments hold rail and shrub alike
+    # and the rail's chain runs through them. Its top is its pieces' median highest point.
+    rng = np.random.default_rng(5)
+    rail_s = np.arange(500) * 0.01 + 0.005
+    shrub_s = rng.uniform(2.0, 3.0, 2000)
+    station = np.concatenate([rail_s, shrub_s])
+    lateral = np.concatenate([np.full(500, 3.0), rng.uniform(3.0, 3.6, 2000)])
+    height = np.concatenate([np.full(500, 0.7), rng.uniform(0.0, 1.8, 2000)])
+    # Slices not cut across: each is one segment, as where rail and shrub touch.
+    segments = slice_components(np.zeros(len(station), int), station, PARAMS)
+    table = shape_features(
+        station, lateral, height, np.full(len(station), 100, np.uint16), segments, PARAMS
+    )
+    f = {name: table[:, i] for i, name in enumerate(SHAPE_FEATURE_NAMES)}
+    assert len(segments) == 10
+    assert f["height_max_m"][[4, 5]].min() > 1.75
+    np.testing.assert_allclose(f["chain_log_slices"], np.log(10))
+    np.testing.assert_allclose(f["chain_height_top_m"], 0.7)  # eight of ten pieces' tops
+    assert np.all(f["chain_height_min_m"] < 0.05)
+    # Two pieces of three reaching 1.8 m: the median is theirs.
+    short = station < 1.5
+    mixed = np.concatenate([rail_s[rail_s < 1.5], rng.uniform(0.5, 1.5, 2000)])
+    up = np.concatenate([np.full(short[:500].sum(), 0.7), rng.uniform(0.0, 1.8, 2000)])
+    across = np.concatenate([np.full(short[:500].sum(), 3.0), rng.uniform(3.0, 3.6, 2000)])
+    segments = slice_components(np.zeros(len(mixed), int), mixed, PARAMS)
+    table = shape_features(mixed, across, up, np.full(len(mixed), 100, np.uint16), segments, PARAMS)
+    top = table[:, SHAPE_FEATURE_NAMES.index("chain_height_top_m")]
+    assert len(segments) == 3
+    np.testing.assert_allclose(top, np.median(table[:, SHAPE_FEATURE_NAMES.index("height_max_m")]))
+    assert top.min() > 1.75
 
 
 def test_piece_chains_link_consecutive_slices_of_one_component_side_by_side() -> None:
@@ -204,7 +238,7 @@ def test_models_from_before_chains_read_the_whole_components_features() -> None:
     np.testing.assert_allclose(
         f["neighbours_max_component_log_length_m"][rail], f["component_log_length_m"][rail]
     )
-    np.testing.assert_allclose(f["chain_height_max_m"][rail], 0.7)
+    np.testing.assert_allclose(f["chain_height_top_m"][rail], 0.7)
     # On a clean rail the chain is the component.
     station = np.arange(500) * 0.01 + 0.005
     _, clean = features_of(station, np.full(500, 3.0), np.full(500, 0.7), np.zeros(500, int))
@@ -225,7 +259,8 @@ def test_models_from_before_chains_read_the_whole_components_features() -> None:
         PARAMS,
     )
     for name in WHOLE_COMPONENT_FEATURE_NAMES:
-        chain = name.replace("component", "chain")
+        chain = name.replace("component_height_max_m", "chain_height_top_m")
+        chain = chain.replace("component", "chain")
         np.testing.assert_array_equal(
             table[:, SEGMENT_FEATURE_NAMES.index(name)],
             table[:, SEGMENT_FEATURE_NAMES.index(chain)],
