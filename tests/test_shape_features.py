@@ -156,36 +156,30 @@ def test_a_rail_keeps_its_own_chain_features_beside_the_hedge_its_component_hold
 
 def test_a_shrub_grown_into_a_rail_does_not_raise_the_rails_chain_top() -> None:
     # One component: a 5 m rail 3 m left at 0.7 m, and a shrub 0-1.8 m tall touching it from
-    # behind over 1 m (slices 4 and 5), so those two slices' segments hold rail and shrub alike
-    # and the rail's chain runs through them. Its top is its pieces' median highest point.
+    # behind over 1 m (slices 4 and 5). Slices are not cut across (features_of): each is one
+    # segment holding rail and shrub alike, as where the two touch, so the rail's chain runs
+    # through the shrub. Its top is its pieces' median highest point.
     rng = np.random.default_rng(5)
     rail_s = np.arange(500) * 0.01 + 0.005
-    shrub_s = rng.uniform(2.0, 3.0, 2000)
-    station = np.concatenate([rail_s, shrub_s])
-    lateral = np.concatenate([np.full(500, 3.0), rng.uniform(3.0, 3.6, 2000)])
-    height = np.concatenate([np.full(500, 0.7), rng.uniform(0.0, 1.8, 2000)])
-    # Slices not cut across: each is one segment, as where rail and shrub touch.
-    segments = slice_components(np.zeros(len(station), int), station, PARAMS)
-    table = shape_features(
-        station, lateral, height, np.full(len(station), 100, np.uint16), segments, PARAMS
-    )
-    f = {name: table[:, i] for i, name in enumerate(SHAPE_FEATURE_NAMES)}
+
+    def rail_and_shrub(length_m: float, shrub_from_m: float, shrub_to_m: float):
+        rail = rail_s[rail_s < length_m]
+        station = np.concatenate([rail, rng.uniform(shrub_from_m, shrub_to_m, 2000)])
+        lateral = np.concatenate([np.full(len(rail), 3.0), rng.uniform(3.0, 3.6, 2000)])
+        height = np.concatenate([np.full(len(rail), 0.7), rng.uniform(0.0, 1.8, 2000)])
+        return features_of(station, lateral, height, np.zeros(len(station), int))
+
+    segments, f = rail_and_shrub(5.0, 2.0, 3.0)
     assert len(segments) == 10
     assert f["height_max_m"][[4, 5]].min() > 1.75
     np.testing.assert_allclose(f["chain_log_slices"], np.log(10))
     np.testing.assert_allclose(f["chain_height_top_m"], 0.7)  # eight of ten pieces' tops
     assert np.all(f["chain_height_min_m"] < 0.05)
     # Two pieces of three reaching 1.8 m: the median is theirs.
-    short = station < 1.5
-    mixed = np.concatenate([rail_s[rail_s < 1.5], rng.uniform(0.5, 1.5, 2000)])
-    up = np.concatenate([np.full(short[:500].sum(), 0.7), rng.uniform(0.0, 1.8, 2000)])
-    across = np.concatenate([np.full(short[:500].sum(), 3.0), rng.uniform(3.0, 3.6, 2000)])
-    segments = slice_components(np.zeros(len(mixed), int), mixed, PARAMS)
-    table = shape_features(mixed, across, up, np.full(len(mixed), 100, np.uint16), segments, PARAMS)
-    top = table[:, SHAPE_FEATURE_NAMES.index("chain_height_top_m")]
+    segments, f = rail_and_shrub(1.5, 0.5, 1.5)
     assert len(segments) == 3
-    np.testing.assert_allclose(top, np.median(table[:, SHAPE_FEATURE_NAMES.index("height_max_m")]))
-    assert top.min() > 1.75
+    np.testing.assert_allclose(f["chain_height_top_m"], np.median(f["height_max_m"]))
+    assert f["chain_height_top_m"].min() > 1.75
 
 
 def test_piece_chains_link_consecutive_slices_of_one_component_side_by_side() -> None:

@@ -266,11 +266,12 @@ def _course_features(
     np.minimum.at(first, group, first_m)
     np.maximum.at(last, group, last_m)
     low = np.full(n_group, np.inf)
-    high = np.full(n_group, -np.inf)
     np.minimum.at(low, group, h_min)
-    np.maximum.at(high, group, h_max)
     if median_top:
         high = _median_per_group(group, h_max, n_group)
+    else:
+        high = np.full(n_group, -np.inf)
+        np.maximum.at(high, group, h_max)
     # Lateral course: a least-squares line of the segments' mean offset against station.
     w = np.bincount(group, minlength=n_group).astype(np.float64)
     sx = np.bincount(group, station_m, n_group) / w
