@@ -143,3 +143,17 @@ def test_draws_are_pools_one_to_nine(lodo) -> None:  # type: ignore[no-untyped-d
     # Models of joined pools are kept apart from each pool's on disk.
     assert lodo.pool_tag((1,), 0.0) == "1" and lodo.pool_tag((1, 2), 0.0) == "1+2"
     assert lodo.pool_tag((1, 2), 0.15) == "1+2_hj0.15"
+
+
+def test_test_streets_are_seeds_of_their_own(lodo) -> None:  # type: ignore[no-untyped-def]
+    n = len(list_designs())
+    first = [lodo.test_street_seed(d, 1) for d in range(n)]
+    assert first == [lodo.FIRST_SEED + 10 * d + 5 for d in range(n)]  # the README tables'
+    tests = {lodo.test_street_seed(d, k) for d in range(n) for k in range(1, lodo.TEST_STREETS + 1)}
+    assert len(tests) == n * lodo.TEST_STREETS
+    three_streets = {lodo.FIRST_SEED + 10 * d + i for d in range(n) for i in (1, 2, 3)}
+    pools = {lodo.pool_seed(draw, j) for draw in (1, 2) for j in range(2 * lodo.POOL_PAIRS)}
+    assert not tests & (three_streets | pools)
+    for street in (0, lodo.TEST_STREETS + 1):
+        with pytest.raises(ValueError, match="test street"):
+            lodo.test_street_seed(0, street)
