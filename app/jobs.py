@@ -39,6 +39,15 @@ class JobTimeLimitError(Exception):
     """Raised inside a job's work, at its next progress report, past its time limit."""
 
 
+class JobFailed(Exception):
+    """A job's failure told in an operator's words: ``advice`` says what went wrong and what to
+    do; the exception it is raised from keeps the technical error (the job's ``error``)."""
+
+    def __init__(self, advice: str) -> None:
+        super().__init__(advice)
+        self.advice = advice
+
+
 class JobBusyError(Exception):
     """A job of that kind is already queued or running."""
 
@@ -55,6 +64,7 @@ class Job:
     progress: float = 0.0
     message: str = ""
     error: str | None = None
+    advice: str | None = None
     result: dict[str, Any] | None = None
     created: float = field(default_factory=time.time)
     finished: float | None = None
@@ -69,6 +79,7 @@ class Job:
             "progress": round(self.progress, 4),
             "message": self.message,
             "error": self.error,
+            "advice": self.advice,
             "result": self.result,
         }
 
@@ -150,7 +161,9 @@ class JobRunner:
         except JobCancelled:
             job.status, job.message = "cancelled", "cancelled"
         except Exception as exc:  # a job's failure is reported, never lost in a thread
-            job.error = f"{type(exc).__name__}: {exc}"
+            cause = exc.__cause__ if isinstance(exc, JobFailed) and exc.__cause__ else exc
+            job.error = f"{type(cause).__name__}: {cause}"
+            job.advice = exc.advice if isinstance(exc, JobFailed) else None
             job.message = "failed"
             job.status = "failed"
             if not isinstance(exc, JobTimeLimitError):

@@ -8,7 +8,9 @@ from typing import Any
 
 import numpy as np
 
+from app.jobs import JobFailed
 from app.session import ReviewSession
+from guardrail_core.errors import GuardrailError, IncompatibleModelError, TrainingDataError
 from guardrail_core.extract.classify import ClassifierParams
 from guardrail_core.formats.drive import drive_parts
 from guardrail_core.reconstruct.drive_input import gather_reconstruction_points
@@ -29,16 +31,19 @@ def fine_tune(
 
     def work(report: Report) -> dict[str, Any]:
         report(0.0, "collecting labels")
-        start = session.models.fine_tuning_start()
-        trained = train_from_run(
-            run,
-            operator_label=operator_label,
-            params=ClassifierParams(mode=mode),
-            include_unreviewed=include_unreviewed,
-            progress_fn=lambda f, m: report(0.95 * f, m),
-            drive_root=session.drive.root,
-            start_from=start,
-        )
+        try:
+            start = session.models.fine_tuning_start()
+            trained = train_from_run(
+                run,
+                operator_label=operator_label,
+                params=ClassifierParams(mode=mode),
+                include_unreviewed=include_unreviewed,
+                progress_fn=lambda f, m: report(0.95 * f, m),
+                drive_root=session.drive.root,
+                start_from=start,
+            )
+        except GuardrailError as exc:
+            raise JobFailed(training_advice(exc)) from exc
         report(0.96, "saving the model")
         session.models.add(trained.model)
         return {
@@ -51,6 +56,27 @@ def fine_tune(
         }
 
     return work
+
+
+def training_advice(exc: GuardrailError) -> str:
+    """What a failed fine-tuning means to an operator, and what to do; the labels given so far
+    are in the label store whatever failed."""
+    if isinstance(exc, TrainingDataError):
+        return (
+            "Not enough labels to learn from yet: fine-tuning needs segments of both kinds. "
+            "Label more segments (g guardrail, o other), then press Fine-tune again."
+        )
+    if isinstance(exc, IncompatibleModelError):
+        return (
+            "This run was made by an older version of the program, and its model cannot learn "
+            "from it. Process the drive again (guardrail process DRIVE --out RUN) and open the "
+            "new run: your labels are kept, they belong to the drive."
+        )
+    return (
+        "The model that made this run cannot be fine-tuned here. Your labels are kept. "
+        "Activate another model under Model, or process the drive with a model trained by "
+        "guardrail train, then press Fine-tune again."
+    )
 
 
 def activate(session: ReviewSession, version: str) -> dict[str, Any]:

@@ -384,7 +384,10 @@ class Job(ResponseModel):
     status: Literal["queued", "running", "done", "failed", "cancelled"]
     progress: float = Field(description="0..1")
     message: str
-    error: str | None
+    error: str | None = Field(description="what failed, as the program says it")
+    advice: str | None = Field(
+        default=None, description="what failed and what to do, in an operator's words"
+    )
     result: TrainResult | ReconstructResult | None = Field(description="when done")
 
 

@@ -62,6 +62,18 @@ def run_path(drive: Drive, model_path: Path, tmp_path_factory: pytest.TempPathFa
     return out
 
 
+@pytest.fixture(scope="session")
+def shipped_run_path(drive_path: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The test drive processed by ``guardrail process`` with the shipped default model, as a
+    user's first run is (no ``--model``)."""
+    from guardrail_core.cli import main
+
+    out = tmp_path_factory.mktemp("shipped") / "run"
+    command = ["process", str(drive_path), "--out", str(out), "--workers", "1", "--quiet"]
+    assert main(command) == 0
+    return out
+
+
 @pytest.fixture(scope="module")
 def module_session(
     drive_path: Path, run_path: Path, tmp_path_factory: pytest.TempPathFactory

@@ -45,3 +45,17 @@ def test_a_model_reading_chains_is_refused_on_a_run_before_them(
     assert "process the drive again" in answer.json()["detail"]
     for name, content in before.items():
         assert (old_run / name).read_bytes() == content, name
+
+
+def test_a_training_of_a_model_reading_chains_on_a_run_before_them_says_what_to_do(
+    client: TestClient, old_run: Path
+) -> None:
+    before = {name: (old_run / name).read_bytes() for name in ("segments.npz", "run.json")}
+    job_id = client.post("/api/train", json={}).json()["job"]
+    job = client.app.state.jobs.wait(job_id, timeout=600)
+    assert job.status == "failed"
+    assert job.error.startswith("IncompatibleModelError: ")
+    assert "Process the drive again (guardrail process DRIVE --out RUN)" in job.advice
+    assert "your labels are kept" in job.advice
+    for name, content in before.items():
+        assert (old_run / name).read_bytes() == content, name

@@ -26,6 +26,7 @@ from guardrail_core.extract.shape_features import (
     SEGMENT_FEATURE_DIM,
     SHAPE_FEATURE_NAMES,
     WHOLE_COMPONENT_FEATURE_NAMES,
+    feature_columns,
 )
 
 QUICK = SegmentHeadParams(hidden_units=16, epochs=300, members=1)
@@ -331,5 +332,27 @@ def test_a_head_starts_only_from_a_head_of_its_own_shape() -> None:
     np.testing.assert_allclose(same.proba(features, crop), start.proba(features, crop), atol=1e-5)
     with pytest.raises(InvalidOptionError, match="units wide"):
         fit_segment_head(features, crop, labels, dataclasses.replace(QUICK, members=2), start=start)
-    with pytest.raises(InvalidOptionError, match="reads 3 features"):
+    with pytest.raises(InvalidOptionError, match="it reads 3 columns, 2 are asked for"):
         fit_segment_head(features[:, :2], crop, labels, QUICK, start=start)
+
+
+def test_a_head_started_on_other_features_is_refused_naming_them() -> None:
+    """The message names the features that differ, not only how many (both heads below read
+    three: "reads 3 features, not the 3 asked for" told an operator nothing)."""
+    rng = np.random.default_rng(6)
+    features, crop, labels = synthetic(500, rng)
+    wide = np.zeros((len(features), SEGMENT_FEATURE_DIM), np.float32)
+    names = ("height_min_m", "log_points", "chain_log_length_m", "component_log_length_m")
+    wide[:, feature_columns(names[:3])] = features
+    start = fit_segment_head(wide, crop, labels, QUICK, columns=feature_columns(names[:3]))
+    asked = feature_columns([names[0], names[1], names[3]])
+    with pytest.raises(InvalidOptionError) as refused:
+        fit_segment_head(wide, crop, labels, QUICK, columns=asked, start=start)
+    assert str(refused.value) == (
+        "segment head: the head to start from reads other segment features than those asked "
+        "for (it reads chain_log_length_m, not asked for; it does not read "
+        "component_log_length_m, asked for); fine-tune it on the columns it reads "
+        "(SegmentHead.columns)"
+    )
+    tuned = fit_segment_head(wide, crop, labels, QUICK, columns=start.columns, start=start)
+    np.testing.assert_array_equal(tuned.columns, start.columns)

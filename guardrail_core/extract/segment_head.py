@@ -454,7 +454,7 @@ def _check_start(
     start: SegmentHead, columns: np.ndarray | None, n_inputs: int, params: SegmentHeadParams
 ) -> None:
     """:class:`InvalidOptionError` unless ``start`` can be fine-tuned with these columns and
-    params (see :func:`fit_segment_head`)."""
+    params (see :func:`fit_segment_head`); the message names the features that differ."""
     same_columns = (start.columns is None and columns is None) or (
         start.columns is not None
         and columns is not None
@@ -462,12 +462,39 @@ def _check_start(
     )
     width = start._net.state_dict()["0.weight"].shape[0]
     if not same_columns or start.n_inputs != n_inputs:
+        differ = _columns_differ(start.columns, start.n_inputs - 2, columns, n_inputs - 2)
         raise InvalidOptionError(
-            f"segment head: the head to start from reads {start.n_inputs - 2} features, "
-            f"not the {n_inputs - 2} asked for"
+            "segment head: the head to start from reads other segment features than those "
+            f"asked for ({differ}); "
+            "fine-tune it on the columns it reads (SegmentHead.columns)"
         )
     if width != params.members * params.hidden_units:
         raise InvalidOptionError(
             f"segment head: the head to start from is {width} units wide, not "
             f"{params.members} members of {params.hidden_units}"
         )
+
+
+def column_names(columns: np.ndarray | None) -> tuple[str, ...]:
+    """The segment features' names of ``columns`` (K,) int (None: every column)."""
+    if columns is None:
+        return SEGMENT_FEATURE_NAMES
+    return tuple(SEGMENT_FEATURE_NAMES[int(k)] for k in columns)
+
+
+def _columns_differ(
+    start: np.ndarray | None, n_start: int, asked: np.ndarray | None, n_asked: int
+) -> str:
+    """Which features the head to start from (``start`` columns, ``n_start`` of them) reads and
+    the ones asked for (``asked``, ``n_asked``) do not, and the reverse, by name."""
+    if (start is None or asked is None) and n_start != n_asked:
+        return f"it reads {n_start} columns, {n_asked} are asked for"
+    have, want = column_names(start), column_names(asked)
+    only_start = [name for name in have if name not in want]
+    only_asked = [name for name in want if name not in have]
+    parts = []
+    if only_start:
+        parts.append("it reads " + ", ".join(only_start) + ", not asked for")
+    if only_asked:
+        parts.append("it does not read " + ", ".join(only_asked) + ", asked for")
+    return "; ".join(parts) or "the same features in another order"

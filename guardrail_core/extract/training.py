@@ -24,7 +24,12 @@ from guardrail_core.extract.classifier_training import (
 from guardrail_core.extract.crop_classifier import GuardrailClassifier, model_version
 from guardrail_core.extract.crops import CROP_OK
 from guardrail_core.extract.pipeline import ExtractionParams, extract, segment_crops
-from guardrail_core.extract.segment_head import SegmentHead, SegmentHeadParams, fit_segment_head
+from guardrail_core.extract.segment_head import (
+    SegmentHead,
+    SegmentHeadParams,
+    column_names,
+    fit_segment_head,
+)
 from guardrail_core.extract.segment_truth import segment_truth
 from guardrail_core.formats.drive import load_drive
 
@@ -210,8 +215,9 @@ def train_on_set(
     trained_on : description of the data stored in ``info["trained_on"]``; the counts
         ``segments``, ``crops``, ``guardrail`` and ``other`` are added
     start_head : a trained segment head to fine-tune rather than draw a new one (see
-        :func:`~guardrail_core.extract.segment_head.fit_segment_head`); the crop classifier is
-        trained anew either way
+        :func:`~guardrail_core.extract.segment_head.fit_segment_head`): the new head reads the
+        features it reads (``head``'s ignored features then choose nothing); the crop
+        classifier is trained anew either way
 
     Returns
     -------
@@ -281,7 +287,10 @@ def train_on_set(
         progress=progress,
         on_fold=lambda k: report(f"crop classifier of fold {k + 1}/{head.folds}"),
     )
-    columns = head.columns()
+    # A fine-tuned head keeps the inputs it was trained on: the features the head to start from
+    # reads, whatever ``head`` would choose for a new one (the shipped model reads the whole
+    # component's features, which no new head reads).
+    columns = head.columns() if start_head is None else start_head.columns
     rng = np.random.default_rng(params.seed)
     held = held_out_mask(
         data.labels, data.groups, params.held_out_fraction, rng, draws=params.held_out_draws
@@ -326,7 +335,7 @@ def train_on_set(
     info = model.info
     info["metrics"] = {"held_out": held_out, "held_out_crops": info["metrics"]["held_out"]}
     info["segment_head"] = {
-        "features": list(head.feature_names()),
+        "features": list(column_names(columns)),
         "params": head.to_json(),
         "folds_without_crop_classifier": missing_folds,
         "seconds": round(time.perf_counter() - clock, 2),

@@ -500,8 +500,10 @@ def _fine_tuning_head(
     start_from: GuardrailClassifier | None, head: SegmentHeadParams
 ) -> tuple[SegmentHeadParams, SegmentHead | None]:
     """The segment head's parameters and the head to start from: ``start_from``'s own shape
-    (members, width, the features it reads) with ``head``'s training settings; ``head`` and
-    None where there is no head to start from."""
+    (members, width, its ignored features as recorded) with ``head``'s training settings;
+    ``head`` and None where there is no head to start from. The new head reads the columns the
+    head to start from reads (:func:`~guardrail_core.extract.training.train_on_set`), which
+    for a model trained before chains are not those its ignored features would choose."""
     if start_from is None or start_from.segment_head is None:
         return head, None
     saved = SegmentHeadParams.from_json(start_from.info.get("segment_head", {}).get("params", {}))

@@ -515,7 +515,7 @@ function pollJob(jobId, failures) {
       $("train").disabled = false;
       if (job.status === "done") showComparison(job.result);
       else if (job.status === "cancelled") toast("fine-tuning cancelled", "info");
-      else toast(`fine-tuning failed: ${job.error ?? "unknown error"}`, "error");
+      else toast(`fine-tuning failed: ${job.advice ?? job.error ?? "unknown error"}`, "error");
       return;
     }
     pollJob(jobId, 0);
@@ -528,7 +528,9 @@ function renderJob(job) {
   progress.dataset.status = job.status;
   let text = `${job.status}${typeof job.progress === "number" ? ` ${pct(job.progress, 0)}` : ""}`;
   if (job.message) text += ` — ${job.message}`;
-  if (job.status === "failed") text = `failed: ${job.error ?? job.message ?? "unknown error"}`;
+  if (job.status === "failed") text = `failed: ${job.advice ?? job.error ?? job.message ?? "unknown error"}`;
+  // The program's own words stay a hover away, for whoever looks into it.
+  $("train-message").title = job.status === "failed" && job.advice ? job.error ?? "" : "";
   $("train-message").textContent = text;
 }
 

@@ -62,7 +62,7 @@ def _get(url: str) -> dict:
 class Server:
     """``guardrail serve`` in a subprocess."""
 
-    def __init__(self, drive: Path, run: Path, review: Path, model: Path, log: Path) -> None:
+    def __init__(self, drive: Path, run: Path, review: Path, model: Path | None, log: Path) -> None:
         self.args = [
             sys.executable,
             "-m",
@@ -73,8 +73,7 @@ class Server:
             str(run),
             "--review-dir",
             str(review),
-            "--model",
-            str(model),
+            *(["--model", str(model)] if model is not None else []),
             "--operator",
             "browser-test",
             "--window",
@@ -390,6 +389,86 @@ def test_review_app_in_the_browser(
         page.screenshot(path=shots / "gallery.png")
         browser.close()
     assert not errors, errors
+
+
+@pytest.fixture()
+def shipped_server(drive_path: Path, shipped_run_path: Path, tmp_path: Path) -> Iterator[Server]:
+    """``guardrail serve DRIVE --run RUN`` on a run the shipped default model made."""
+    run = tmp_path / "run"
+    shutil.copytree(shipped_run_path, run)
+    s = Server(drive_path, run, tmp_path / "review", None, tmp_path / "server.log")
+    s.start()
+    yield s
+    s.kill()
+
+
+def test_fine_tuning_the_shipped_model_from_the_page(shipped_server: Server, shots: Path) -> None:
+    """The page's Fine-tune button on a run of the shipped default model (which reads the
+    whole component's features): with labels of one kind only it says so and what to do; with
+    labels of both, a new model comes back, and activating it re-predicts the run."""
+    from playwright.sync_api import expect, sync_playwright
+
+    assert CHROMIUM.is_file(), "browser tests need Debian's chromium (make test installs it)"
+    url = shipped_server.url
+    shipped = _get(f"{url}/api/models")["active"]
+    every = list(range(_get(f"{url}/api/info")["n_segments"]))
+    _send("POST", f"{url}/api/labels/batch", {"segments": every, "label": "other"})
+
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        page = browser.new_page(viewport={"width": 1440, "height": 900})
+        page.set_default_timeout(WAIT_MS)
+        errors: list[str] = []
+        page.on("pageerror", lambda exc: errors.append(str(exc)))
+        body = page.locator("body")
+        page.goto(url)
+        expect(body).to_have_attribute("data-state", "ready", timeout=WAIT_MS)
+        expect(page.locator("#header-model")).to_contain_text(shipped[:15])
+
+        # Every segment labelled other: nothing to learn guardrails from, and the page says so.
+        message = page.locator("#train-message")
+        page.locator("#train").click()
+        expect(message).to_contain_text("Not enough labels to learn from yet", timeout=JOB_MS)
+        expect(message).to_contain_text("Label more segments (g guardrail, o other)")
+        expect(message).to_have_attribute("title", re.compile(r"^TrainingDataError: "))
+        expect(page.locator("#train")).to_be_enabled()
+        page.screenshot(path=shots / "fine-tune-refused.png")
+
+        # Undone, ten labels from the queue as they stand, and Fine-tune again.
+        _send("POST", f"{url}/api/labels/undo", {})
+        for row in _get(f"{url}/api/queue?limit=10")["items"]:
+            _send("PUT", f"{url}/api/segments/{row['id']}/label", {"label": row["label"]})
+        with page.expect_response(_api("POST", "/api/train")) as answer:
+            page.locator("#train").click()
+        assert answer.value.status == 202, answer.value.text()
+        job = answer.value.json()["job"]
+        expect(page.locator("#activate")).to_be_visible(timeout=JOB_MS)
+        assert _get(f"{url}/api/jobs/{job}")["status"] == "done"
+        expect(message).not_to_contain_text("failed")
+        page.screenshot(path=shots / "fine-tune-shipped.png")
+        done = int(body.get_attribute("data-actions") or 0)
+        with page.expect_response(_api("POST", "/api/models/*/activate"), timeout=JOB_MS) as answer:
+            page.locator("#activate").click()
+        assert answer.value.ok, answer.value.text()
+        active = answer.value.json()["active"]
+        assert active == _get(f"{url}/api/jobs/{job}")["result"]["version"] != shipped
+        expect(body).to_have_attribute("data-actions", str(done + 1), timeout=WAIT_MS)
+        expect(page.locator("#header-model")).to_contain_text(active[:15], timeout=WAIT_MS)
+        assert _get(f"{url}/api/info")["model"]["version"] == active
+        browser.close()
+    assert not errors, errors
+
+
+def _send(method: str, url: str, body: dict) -> dict:
+    request = urllib.request.Request(
+        url,
+        data=json.dumps(body).encode(),
+        headers={"Content-Type": "application/json"},
+        method=method,
+    )
+    with urllib.request.urlopen(request, timeout=60) as answer:
+        assert answer.status == 200, answer.status
+        return json.loads(answer.read())
 
 
 def _point_to_click(
