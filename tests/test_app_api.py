@@ -12,7 +12,6 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from app.jobs import JobRunner
 from app.main import create_app
 from app.session import ReviewSession
 from guardrail_core.errors import InvalidOptionError
@@ -20,7 +19,7 @@ from guardrail_core.extract.crops import CropParams, crop_window, cut_crop
 from guardrail_core.formats.drive import Drive
 from guardrail_core.formats.run_folder import load_run
 from guardrail_core.review.queue import MIN_QUEUE_POINTS, segment_queue_scores, unchecked_runs
-from tests.app_fixtures import copy_run, new_session
+from tests.app_fixtures import api_client, copy_run, new_session
 
 
 @pytest.fixture()
@@ -32,11 +31,8 @@ def session(drive_path: Path, run_path: Path, model_path: Path, tmp_path: Path):
 
 @pytest.fixture()
 def client(session: ReviewSession) -> Iterator[TestClient]:
-    jobs = JobRunner()
-    with TestClient(create_app(session, jobs=jobs)) as c:
-        c.jobs = jobs  # type: ignore[attr-defined]
+    with api_client(session) as c:
         yield c
-    jobs.shutdown()
 
 
 def _segment_with_crop(session: ReviewSession) -> int:

@@ -10,8 +10,6 @@ from pathlib import Path
 import pytest
 from fastapi.testclient import TestClient
 
-from app.jobs import JobRunner
-from app.main import create_app
 from app.scene.tuning import RunTuner
 from app.serve import default_run
 from app.session import ReviewSession
@@ -21,7 +19,7 @@ from guardrail_core.errors import (
     RunFolderError,
     RunFormatVersionError,
 )
-from tests.app_fixtures import copy_run, new_session
+from tests.app_fixtures import api_client, copy_run, new_session
 
 
 @pytest.fixture()
@@ -33,10 +31,8 @@ def session(drive_path: Path, run_path: Path, tmp_path: Path) -> Iterator[Review
 
 @pytest.fixture()
 def client(session: ReviewSession) -> Iterator[TestClient]:
-    jobs = JobRunner()
-    with TestClient(create_app(session, jobs=jobs)) as c:
+    with api_client(session) as c:
         yield c
-    jobs.shutdown()
 
 
 def _set_version(path: Path, version: object) -> None:

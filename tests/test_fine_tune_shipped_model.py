@@ -14,15 +14,13 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from app.jobs import JobRunner
-from app.main import create_app
 from app.session import ReviewSession
 from guardrail_core.extract.model_folder import DEFAULT_MODEL_DIR, load_model
 from guardrail_core.extract.segment_truth import segment_truth
 from guardrail_core.formats.drive import Drive
 from guardrail_core.formats.run_folder import load_run
 from guardrail_core.review.training import predict_run
-from tests.app_fixtures import copy_run, new_session
+from tests.app_fixtures import api_client, copy_run, new_session
 
 #: How long a fine-tuning of the test drive may take before the test fails (about 10 s here).
 JOB_TIMEOUT_S = 600
@@ -38,11 +36,8 @@ def session(drive_path: Path, shipped_run_path: Path, tmp_path: Path) -> Iterato
 
 @pytest.fixture()
 def client(session: ReviewSession) -> Iterator[TestClient]:
-    jobs = JobRunner()
-    with TestClient(create_app(session, jobs=jobs)) as c:
-        c.jobs = jobs  # type: ignore[attr-defined]
+    with api_client(session) as c:
         yield c
-    jobs.shutdown()
 
 
 def test_train_from_the_shipped_model_then_activate(
@@ -88,6 +83,14 @@ def test_train_from_the_shipped_model_then_activate(
     assert {row["id"]: row["label"] == "guardrail" for row in rows} == {
         s: bool(truth[s]) for s in queue
     }
+
+    # With the fine-tuned model active, Train works again, from the shipped model once more.
+    again = client.jobs.wait(  # type: ignore[attr-defined]
+        client.post("/api/train", json={}).json()["job"], timeout=JOB_TIMEOUT_S
+    )
+    assert again.status == "done", again.error
+    second = session.models.load(client.get(f"/api/jobs/{again.id}").json()["result"]["version"])
+    assert second.info["trained_on"]["segment_head_from"] == shipped.version
 
 
 def test_a_training_without_labels_to_learn_from_says_what_to_do(client: TestClient) -> None:

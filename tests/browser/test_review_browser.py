@@ -119,14 +119,19 @@ def shots(tmp_path: Path) -> Iterator[Path]:
         shutil.copytree(folder, target, dirs_exist_ok=True)
 
 
-@pytest.fixture()
-def server(drive_path: Path, run_path: Path, model_path: Path, tmp_path: Path) -> Iterator[Server]:
-    run = tmp_path / "run"
-    shutil.copytree(run_path, run)
-    s = Server(drive_path, run, tmp_path / "review", model_path, tmp_path / "server.log")
+def _serve_a_copy(drive: Path, run: Path, model: Path | None, tmp_path: Path) -> Iterator[Server]:
+    """``guardrail serve`` on a copy of ``run`` (the app writes into it), killed afterwards."""
+    copy = tmp_path / "run"
+    shutil.copytree(run, copy)
+    s = Server(drive, copy, tmp_path / "review", model, tmp_path / "server.log")
     s.start()
     yield s
     s.kill()
+
+
+@pytest.fixture()
+def server(drive_path: Path, run_path: Path, model_path: Path, tmp_path: Path) -> Iterator[Server]:
+    yield from _serve_a_copy(drive_path, run_path, model_path, tmp_path)
 
 
 def test_review_app_in_the_browser(
@@ -348,19 +353,9 @@ def test_review_app_in_the_browser(
 
         # Fine-tune from the labels, see the new model beside the current one, activate it.
         before = _get(f"{server.url}/api/models")["active"]
-        with page.expect_response(_api("POST", "/api/train")) as answer:
-            page.locator("#train").click()
-        assert answer.value.status == 202, answer.value.text()
-        expect(page.locator("#activate")).to_be_visible(timeout=JOB_MS)
-        expect(page.locator("#compare-table")).to_contain_text("guardrail", timeout=WAIT_MS)
-        page.screenshot(path=shots / "fine-tune.png")
-        done = int(body.get_attribute("data-actions") or 0)
-        with page.expect_response(_api("POST", "/api/models/*/activate"), timeout=JOB_MS) as answer:
-            page.locator("#activate").click()
-        assert answer.value.ok, answer.value.text()
-        active = answer.value.json()["active"]
+        job, active = _fine_tune_and_activate(page, shots / "fine-tune.png")
+        assert _get(f"{server.url}/api/jobs/{job}")["result"]["version"] == active
         assert active != before and _get(f"{server.url}/api/models")["active"] == active
-        expect(body).to_have_attribute("data-actions", str(done + 1), timeout=WAIT_MS)
         expect(page.locator("#header-model")).to_contain_text(active[:15], timeout=WAIT_MS)
         row = _get(f"{server.url}/api/segments/{s}")
         assert row["label"] == flipped, "an operator's label outlives a model change"
@@ -394,12 +389,7 @@ def test_review_app_in_the_browser(
 @pytest.fixture()
 def shipped_server(drive_path: Path, shipped_run_path: Path, tmp_path: Path) -> Iterator[Server]:
     """``guardrail serve DRIVE --run RUN`` on a run the shipped default model made."""
-    run = tmp_path / "run"
-    shutil.copytree(shipped_run_path, run)
-    s = Server(drive_path, run, tmp_path / "review", None, tmp_path / "server.log")
-    s.start()
-    yield s
-    s.kill()
+    yield from _serve_a_copy(drive_path, shipped_run_path, None, tmp_path)
 
 
 def test_fine_tuning_the_shipped_model_from_the_page(shipped_server: Server, shots: Path) -> None:
@@ -438,25 +428,35 @@ def test_fine_tuning_the_shipped_model_from_the_page(shipped_server: Server, sho
         _send("POST", f"{url}/api/labels/undo", {})
         for row in _get(f"{url}/api/queue?limit=10")["items"]:
             _send("PUT", f"{url}/api/segments/{row['id']}/label", {"label": row["label"]})
-        with page.expect_response(_api("POST", "/api/train")) as answer:
-            page.locator("#train").click()
-        assert answer.value.status == 202, answer.value.text()
-        job = answer.value.json()["job"]
-        expect(page.locator("#activate")).to_be_visible(timeout=JOB_MS)
-        assert _get(f"{url}/api/jobs/{job}")["status"] == "done"
+        job, active = _fine_tune_and_activate(page, shots / "fine-tune-shipped.png")
         expect(message).not_to_contain_text("failed")
-        page.screenshot(path=shots / "fine-tune-shipped.png")
-        done = int(body.get_attribute("data-actions") or 0)
-        with page.expect_response(_api("POST", "/api/models/*/activate"), timeout=JOB_MS) as answer:
-            page.locator("#activate").click()
-        assert answer.value.ok, answer.value.text()
-        active = answer.value.json()["active"]
         assert active == _get(f"{url}/api/jobs/{job}")["result"]["version"] != shipped
-        expect(body).to_have_attribute("data-actions", str(done + 1), timeout=WAIT_MS)
         expect(page.locator("#header-model")).to_contain_text(active[:15], timeout=WAIT_MS)
         assert _get(f"{url}/api/info")["model"]["version"] == active
         browser.close()
     assert not errors, errors
+
+
+def _fine_tune_and_activate(page, shot: Path) -> tuple[str, str]:  # type: ignore[no-untyped-def]
+    """Press Fine-tune, wait for the new model beside the current one (``shot`` then), press
+    Activate and wait until the page has shown it: the job's id and the active version."""
+    from playwright.sync_api import expect
+
+    body = page.locator("body")
+    with page.expect_response(_api("POST", "/api/train")) as answer:
+        page.locator("#train").click()
+    assert answer.value.status == 202, answer.value.text()
+    job = answer.value.json()["job"]
+    expect(page.locator("#activate")).to_be_visible(timeout=JOB_MS)
+    expect(page.locator("#compare-table")).to_contain_text("guardrail", timeout=WAIT_MS)
+    page.screenshot(path=shot)
+    done = int(body.get_attribute("data-actions") or 0)
+    with page.expect_response(_api("POST", "/api/models/*/activate"), timeout=JOB_MS) as answer:
+        page.locator("#activate").click()
+    assert answer.value.ok, answer.value.text()
+    active = answer.value.json()["active"]
+    expect(body).to_have_attribute("data-actions", str(done + 1), timeout=WAIT_MS)
+    return job, active
 
 
 def _send(method: str, url: str, body: dict) -> dict:
