@@ -12,8 +12,8 @@ from guardrail_core.classes import TruthClass
 from guardrail_core.errors import SceneSpecError
 from guardrail_core.extract.lattice import build_lattice
 from guardrail_core.formats.drive import Drive, load_drive
+from guardrail_core.sensors.lidar_models import LIDAR_MODELS
 from guardrail_core.sensors.scanner import MULTIBEAM
-from guardrail_core.synth.multibeam import hdl64_elevations_deg
 from guardrail_core.synth.scene import build_scene, load_scene_spec
 from guardrail_core.synth.simulate import SimulationOptions, simulate_drive
 
@@ -52,7 +52,7 @@ def test_frames_and_rings(multibeam_drive: Drive) -> None:
         sensor = position + rotation @ drive.scanner.T_vehicle_scanner[:3, 3]
         local = np.einsum("nji,nj->ni", rotation, points.xyz[mine] - sensor)
         elevation = np.rad2deg(np.arctan2(local[:, 2], np.hypot(local[:, 0], local[:, 1])))
-        expected = hdl64_elevations_deg()[ring[mine]]
+        expected = np.asarray(LIDAR_MODELS["hdl64e"].elevations_deg)[ring[mine]]
         assert np.median(np.abs(elevation - expected)) < 0.1
 
 

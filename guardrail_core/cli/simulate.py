@@ -63,6 +63,12 @@ def add_parser(subparsers: common.Subparsers) -> None:
         "multibeam: a Velodyne HDL-64E as on the KITTI car, one frame every --frame-every metres",
     )
     own.add_argument(
+        "--lidar",
+        metavar="SENSOR",
+        help="with --scanner multibeam: the spinning LiDAR's beams and turn (hdl64e, the "
+        "default; pandar64, os1-128, os1-64, vlp16, hdl32e)",
+    )
+    own.add_argument(
         "--frame-every",
         type=float,
         metavar="METRES",
@@ -128,6 +134,7 @@ def add_parser(subparsers: common.Subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from guardrail_core.errors import InvalidOptionError
     from guardrail_core.formats.drive import open_drive
     from guardrail_core.synth.scene import load_scene_spec, random_scene_spec
     from guardrail_core.synth.simulate import SimulationOptions, simulate_drive
@@ -161,10 +168,14 @@ def run(args: argparse.Namespace) -> int:
             height_jitter=args.height_jitter,
         )
     scanner = dict(spec.get("scanner") or {})
-    if args.scanner:
-        scanner["kind"] = args.scanner
+    if args.lidar is not None and args.scanner == "profile":
+        raise InvalidOptionError("--lidar names a spinning LiDAR: it goes with --scanner multibeam")
+    if args.scanner or args.lidar:
+        scanner["kind"] = args.scanner or "multibeam"
         if args.frame_every is not None:
             scanner["frame_every_m"] = args.frame_every
+        if args.lidar is not None:
+            scanner["sensor"] = args.lidar
     for key, value in (
         ("range_noise_m", args.range_noise),
         ("dropout", args.dropout),

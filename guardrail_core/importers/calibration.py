@@ -10,12 +10,19 @@ else by the file's stem. A JSON file may also be a list of blocks with ``name`` 
 ``distortion_coefficients`` (or ``dist``)    Brown-Conrady k1, k2, p1, p2[, k3[, ...]] in OpenCV order;
                                              beyond the fifth, coefficients must be zero
 ``image_width``, ``image_height``            pixels (or ``width``, ``height``)
-``T_vehicle_camera``                         4 x 4, camera frame (OpenCV) to vehicle frame
+``T_vehicle_camera``                         4 x 4, camera frame (OpenCV) to vehicle frame; or one
+                                             of the mountings on a LiDAR below
 ``distortion_model`` (optional)              ``plumb_bob``, ``radtan`` or ``brown-conrady...``
 ==========================================  ==========================================================
 
 A matrix may be an ``!!opencv-matrix`` (as ``cv2.FileStorage`` writes it), a ``{rows, cols,
 data}`` mapping (as ROS ``camera_info`` YAML has it), a nested list or a flat list.
+
+For frames of one LiDAR (``guardrail import lidar``) the vehicle frame is the LiDAR's, and a
+camera's mounting may be given as calibration tools write it: ``T_lidar_camera`` (camera to
+LiDAR, the same as ``T_vehicle_camera``), or ``T_camera_lidar``, ``lidar_to_camera`` or
+``T_cam_velo`` (LiDAR to camera: a LiDAR point ``p`` lands at ``T @ p`` in the camera's frame;
+4 x 4, or 3 x 4 as KITTI's ``Tr``). One of them, once.
 """
 
 from __future__ import annotations
@@ -30,7 +37,7 @@ import numpy as np
 import yaml
 
 from guardrail_core.errors import MissingSourceFileError, SourceFormatError
-from guardrail_core.geom.frames import make_transform, rotation_from_euler
+from guardrail_core.geom.frames import invert_transform, make_transform, rotation_from_euler
 from guardrail_core.sensors.camera import Camera
 
 #: Camera names become folder names under ``images/``.
@@ -42,7 +49,6 @@ _ALIASES = {
     "dist": ("distortion_coefficients", "dist"),
     "width": ("image_width", "width"),
     "height": ("image_height", "height"),
-    "T_vehicle_camera": ("T_vehicle_camera",),
 }
 #: A rotation block of a 4 x 4 transform may be off orthonormal by this much (calibrations are
 #: often written with six decimals); a transposed or scaled matrix is far off.
@@ -224,10 +230,39 @@ def camera_from_block(name: str, block: Mapping, where: str) -> Camera:
     dist[: min(5, coefficients.size)] = coefficients[:5]
     width = _positive_int(_field(block, "width", where), f"{where}: image_width")
     height = _positive_int(_field(block, "height", where), f"{where}: image_height")
-    transform = as_rigid_transform(
-        _field(block, "T_vehicle_camera", where), f"{where}: T_vehicle_camera"
-    )
-    return Camera(name, width, height, K, dist, transform)
+    return Camera(name, width, height, K, dist, _camera_mounting(block, where))
+
+
+#: A camera's mounting keys: True where the matrix maps the vehicle (LiDAR) into the camera.
+_MOUNTINGS = {
+    "T_vehicle_camera": False,
+    "T_lidar_camera": False,
+    "T_camera_lidar": True,
+    "lidar_to_camera": True,
+    "T_cam_velo": True,
+}
+
+
+def _camera_mounting(block: Mapping, where: str) -> np.ndarray:
+    """(4, 4) ``T_vehicle_camera`` from whichever mounting key the block has (module docstring)."""
+    given = [key for key in _MOUNTINGS if key in block]
+    if len(given) != 1:
+        raise SourceFormatError(
+            f"{where}: expected one of {', '.join(repr(k) for k in _MOUNTINGS)}, got "
+            f"{given or 'none'}"
+        )
+    key = given[0]
+    value = block[key]
+    if isinstance(value, Mapping) and "data" in value:
+        value = value["data"]
+    try:
+        flat = np.asarray(value, np.float64).ravel()
+    except (TypeError, ValueError) as exc:
+        raise SourceFormatError(f"{where}: {key} is not numbers") from exc
+    if flat.size == 12:  # 3 x 4, as KITTI's Tr
+        flat = np.concatenate([flat, [0.0, 0.0, 0.0, 1.0]])
+    transform = as_rigid_transform(flat, f"{where}: {key}")
+    return invert_transform(transform) if _MOUNTINGS[key] else transform
 
 
 def read_calibration(path: str | Path) -> list[Camera]:

@@ -1,4 +1,5 @@
-"""A spinning multi-beam scanner (a Velodyne HDL-64E, as on the KITTI car) taking single frames.
+"""A spinning multi-beam scanner (a Velodyne HDL-64E as on the KITTI car, or another preset of
+:mod:`guardrail_core.sensors.lidar_models`) taking single frames.
 
 Real multi-beam data comes as frames: one turn of 64 beams, 10 times a second. The simulator takes
 one frame every ``frame_every_m`` metres, so that a drive holds frames that barely overlap, each as
@@ -15,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from guardrail_core.params import StageParams, param
+from guardrail_core.sensors.lidar_models import LIDAR_MODELS
 from guardrail_core.sensors.scanner import ScannerParams, azimuth_phase
 from guardrail_core.sensors.trajectory import Trajectory
 from guardrail_core.synth.random_streams import child_rng, seed_sequence
@@ -22,20 +24,12 @@ from guardrail_core.synth.raycast import SceneRaycaster
 from guardrail_core.synth.scanner import ReturnModel, Scan, measure_returns
 
 
-def hdl64_elevations_deg() -> np.ndarray:
-    """(64,) beam elevations, degrees, highest first: the HDL-64E's upper block of 32 beams from
-    +2 degrees in 1/3 degree steps, its lower block from -8.83 degrees in 1/2 degree steps."""
-    upper = 2.0 - np.arange(32) / 3.0
-    lower = -8.83 - 0.5 * np.arange(32)
-    return np.concatenate([upper, lower])
-
-
 @dataclass(frozen=True)
 class MultibeamParams(StageParams):
     """The multi-beam scanner and how often it takes a frame."""
 
     elevations_deg: tuple[float, ...] = param(
-        tuple(hdl64_elevations_deg().tolist()),
+        LIDAR_MODELS["hdl64e"].elevations_deg,
         unit="deg",
         ge=-90,
         le=90,

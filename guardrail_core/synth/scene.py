@@ -17,8 +17,9 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from guardrail_core.errors import SceneSpecError
+from guardrail_core.errors import SceneSpecError, SourceFormatError
 from guardrail_core.params import ParameterError
+from guardrail_core.sensors.lidar_models import lidar_model
 from guardrail_core.sensors.scanner import (
     AZIMUTH_BINS,
     DEFAULT_MOUNT_POSITION_M,
@@ -202,8 +203,10 @@ def _scanner(
     data: object, reference_height_m: float
 ) -> tuple[ScannerParams, MultibeamParams | None]:
     """The optional ``scanner`` section: a profile scanner's rates, noise and mounting (RIEGL
-    VQ-250 defaults), or ``kind: multibeam``, a Velodyne HDL-64E taking one frame every
-    ``frame_every_m`` metres (default 60), level at ``height_m`` (1.73) above the road."""
+    VQ-250 defaults), or ``kind: multibeam``, a spinning LiDAR (``sensor``: a preset of
+    :data:`~guardrail_core.sensors.lidar_models.LIDAR_MODELS`, default the Velodyne HDL-64E)
+    taking one frame every ``frame_every_m`` metres (default 60), level at ``height_m`` (1.73)
+    above the road."""
     if not isinstance(data, dict):
         raise SceneSpecError("scanner: expected a mapping")
     where = "scanner"
@@ -217,11 +220,20 @@ def _scanner(
                 f"{height}"
             )
         mount = scanner_mounting((0.0, 0.0, height - reference_height_m), 0.0, 0.0, 0.0)
+        sensor = spec_value(data, "sensor", str, where, "hdl64e")
         try:
-            params = MultibeamParams(frame_every_m=frame_every)
+            model = lidar_model(sensor)
+        except SourceFormatError as exc:
+            raise SceneSpecError(f"scanner.sensor: {exc}") from exc
+        try:
+            params = MultibeamParams(
+                frame_every_m=frame_every,
+                elevations_deg=model.elevations_deg,
+                firings_per_rotation=model.firings_per_rotation,
+            )
             scanner = ScannerParams(
-                rotation_rate_hz=10.0,
-                measurement_rate_hz=10.0 * AZIMUTH_BINS,
+                rotation_rate_hz=model.rotation_hz,
+                measurement_rate_hz=model.rotation_hz * AZIMUTH_BINS,
                 range_noise_m=spec_value(data, "range_noise_m", float, where, 0.02),
                 min_range_m=2.5,  # the car's own body
                 max_range_m=spec_value(data, "max_range_m", float, where, 120.0),
