@@ -47,7 +47,7 @@ from guardrail_core.formats.drive import (
 from guardrail_core.geom.frames import euler_from_rotation, invert_transform, make_transform
 from guardrail_core.importers.calibration import require_file
 from guardrail_core.sensors.camera import Camera
-from guardrail_core.sensors.scanner import AZIMUTH_BINS, MULTIBEAM, ScannerParams, azimuth_phase
+from guardrail_core.sensors.scanner import azimuth_phase, imported_multibeam
 from guardrail_core.sensors.trajectory import Trajectory
 
 #: Height of the Velodyne above the road on the KITTI car (Geiger et al. 2013, Fig. 3).
@@ -387,16 +387,8 @@ def import_kitti(
     )
     points = PointCloud(xyz, gps_time, intensity, rotation, phase)
     trajectory = _trajectory(sequence, chosen, sensor_height_m, T_drive_sequence)
-    scanner = ScannerParams(
-        rotation_rate_hz=ROTATIONS_PER_SECOND,
-        measurement_rate_hz=ROTATIONS_PER_SECOND * AZIMUTH_BINS,
-        t0_s=float(sequence.times[0]),
-        range_noise_m=0.02,
-        min_range_m=0.0,
-        max_range_m=120.0,
-        T_vehicle_scanner=np.eye(4),
-        kind=MULTIBEAM,
-        rings=rings,
+    scanner = imported_multibeam(
+        ROTATIONS_PER_SECOND, float(sequence.times[0]), rings, max_range_m=120.0
     )
 
     with staged_folder(out, overwrite=overwrite, inputs=inputs) as staging:

@@ -46,7 +46,7 @@ from guardrail_core.sensors.lidar_models import (
     read_beam_table,
     rings_from_elevation,
 )
-from guardrail_core.sensors.scanner import AZIMUTH_BINS, MULTIBEAM, ScannerParams, azimuth_phase
+from guardrail_core.sensors.scanner import azimuth_phase, imported_multibeam
 from guardrail_core.sensors.trajectory import Trajectory
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
@@ -363,17 +363,7 @@ def import_lidar(
             "the points' own times lie outside their frames' times by more than a turn: the "
             "frame times (--times, --poses) and the points' times are on different clocks"
         )
-    scanner = ScannerParams(
-        rotation_rate_hz=rate,
-        measurement_rate_hz=rate * AZIMUTH_BINS,
-        t0_s=float(trajectory.time[0]),
-        range_noise_m=0.02,
-        min_range_m=0.0,
-        max_range_m=250.0,
-        T_vehicle_scanner=np.eye(4),
-        kind=MULTIBEAM,
-        rings=rings,
-    )
+    scanner = imported_multibeam(rate, float(trajectory.time[0]), rings, max_range_m=250.0)
     with staged_folder(Path(out), overwrite=overwrite, inputs=[*paths, *given]) as staging:
         records = _copy_images(
             cameras,

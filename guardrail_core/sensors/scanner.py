@@ -222,3 +222,23 @@ class ScannerParams(StageParams):
             ) from exc
         except ParameterError as exc:
             raise DriveFormatError(f"drive.json: scanner: {exc}") from exc
+
+
+def imported_multibeam(
+    rotation_hz: float, t0_s: float, rings: int, max_range_m: float
+) -> ScannerParams:
+    """The scanner of frames imported from a spinning LiDAR: ``rings`` beams turning
+    ``rotation_hz`` times a second from ``t0_s`` (GPS s), the vehicle frame its own, the
+    lattice's azimuth in :data:`AZIMUTH_BINS` bins, 2 cm range noise, returns to
+    ``max_range_m``."""
+    return ScannerParams(
+        rotation_rate_hz=rotation_hz,
+        measurement_rate_hz=rotation_hz * AZIMUTH_BINS,
+        t0_s=t0_s,
+        range_noise_m=0.02,
+        min_range_m=0.0,
+        max_range_m=max_range_m,
+        T_vehicle_scanner=np.eye(4),
+        kind=MULTIBEAM,
+        rings=rings,
+    )
