@@ -131,6 +131,17 @@ def as_matrix(value: object, shape: tuple[int, ...], where: str) -> np.ndarray:
     return array.reshape(shape)
 
 
+def _flat_numbers(value: object, message: str) -> np.ndarray:
+    """(K,) float64 of a matrix, a ``{rows, cols, data}`` mapping or a list; else
+    :class:`SourceFormatError` with ``message``."""
+    if isinstance(value, Mapping) and "data" in value:
+        value = value["data"]
+    try:
+        return np.asarray(value, np.float64).ravel()
+    except (TypeError, ValueError) as exc:
+        raise SourceFormatError(message) from exc
+
+
 def as_rigid_transform(value: object, where: str) -> np.ndarray:
     """A 4 x 4 rigid transform; its last row must be (0, 0, 0, 1) and its rotation orthonormal."""
     t = as_matrix(value, (4, 4), where)
@@ -151,12 +162,7 @@ def mount_transform(value: object, where: str) -> np.ndarray:
     x, y, z (metres, vehicle frame), roll, pitch, yaw (degrees, ``Rz(yaw) Ry(pitch) Rx(roll)``)."""
     if isinstance(value, str):
         value = [v for v in re.split(r"[\s,]+", value.strip()) if v]
-    if isinstance(value, Mapping) and "data" in value:
-        value = value["data"]
-    try:
-        flat = np.asarray(value, np.float64).ravel()
-    except (TypeError, ValueError) as exc:
-        raise SourceFormatError(f"{where}: expected 6 or 16 numbers") from exc
+    flat = _flat_numbers(value, f"{where}: expected 6 or 16 numbers")
     if flat.size == 16:
         return as_rigid_transform(flat, where)
     if flat.size != 6 or not np.all(np.isfinite(flat)):
@@ -209,13 +215,9 @@ def camera_from_block(name: str, block: Mapping, where: str) -> Camera:
     K = as_matrix(_field(block, "K", where), (3, 3), f"{where}: camera_matrix")
     if not (K[0, 0] > 0 and K[1, 1] > 0 and np.allclose(K[2], [0.0, 0.0, 1.0])):
         raise SourceFormatError(f"{where}: camera_matrix needs fx, fy > 0 and a last row 0 0 1")
-    raw = _field(block, "dist", where)
-    if isinstance(raw, Mapping) and "data" in raw:
-        raw = raw["data"]
-    try:
-        coefficients = np.asarray(raw, np.float64).ravel()
-    except (TypeError, ValueError) as exc:
-        raise SourceFormatError(f"{where}: distortion_coefficients are not numbers") from exc
+    coefficients = _flat_numbers(
+        _field(block, "dist", where), f"{where}: distortion_coefficients are not numbers"
+    )
     if coefficients.size not in (4, 5, 8, 12, 14) or not np.all(np.isfinite(coefficients)):
         raise SourceFormatError(
             f"{where}: expected 4, 5, 8, 12 or 14 finite distortion coefficients, got "
@@ -252,13 +254,7 @@ def _camera_mounting(block: Mapping, where: str) -> np.ndarray:
             f"{given or 'none'}"
         )
     key = given[0]
-    value = block[key]
-    if isinstance(value, Mapping) and "data" in value:
-        value = value["data"]
-    try:
-        flat = np.asarray(value, np.float64).ravel()
-    except (TypeError, ValueError) as exc:
-        raise SourceFormatError(f"{where}: {key} is not numbers") from exc
+    flat = _flat_numbers(block[key], f"{where}: {key} is not numbers")
     if flat.size == 12:  # 3 x 4, as KITTI's Tr
         flat = np.concatenate([flat, [0.0, 0.0, 0.0, 1.0]])
     transform = as_rigid_transform(flat, f"{where}: {key}")

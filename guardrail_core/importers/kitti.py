@@ -47,6 +47,7 @@ from guardrail_core.formats.drive import (
 from guardrail_core.geom.frames import euler_from_rotation, invert_transform, make_transform
 from guardrail_core.importers.calibration import require_file
 from guardrail_core.sensors.camera import Camera
+from guardrail_core.sensors.lidar_models import rows_by_elevation
 from guardrail_core.sensors.scanner import azimuth_phase, imported_multibeam
 from guardrail_core.sensors.trajectory import Trajectory
 
@@ -238,15 +239,7 @@ def recover_rings(xyz: np.ndarray) -> tuple[np.ndarray, int]:
     breaks = np.flatnonzero(np.diff(azimuth) < -RING_BREAK_RAD) + 1
     run = np.zeros(n, np.int64)
     run[breaks] = 1
-    run = np.cumsum(run)
-    elevation = np.arctan2(xyz[:, 2], np.hypot(xyz[:, 0], xyz[:, 1]))
-    starts = np.concatenate([[0], breaks])
-    stops = np.concatenate([breaks, [n]])
-    median = np.array([np.median(elevation[a:b]) for a, b in zip(starts, stops, strict=True)])
-    # Rows by elevation, highest first: lattice rows that neighbour are beams that neighbour.
-    rank = np.empty(len(median), np.int64)
-    rank[np.argsort(-median, kind="stable")] = np.arange(len(median))
-    return rank[run], len(median)
+    return rows_by_elevation(np.cumsum(run), xyz)
 
 
 def camera_from_calib(calib: dict[str, np.ndarray], width: int, height: int) -> Camera:

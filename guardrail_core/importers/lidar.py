@@ -42,9 +42,9 @@ from guardrail_core.sensors.camera import Camera
 from guardrail_core.sensors.lidar_models import (
     beams_from_points,
     lidar_model,
-    point_elevations_deg,
     read_beam_table,
     rings_from_elevation,
+    rows_by_elevation,
 )
 from guardrail_core.sensors.scanner import azimuth_phase, imported_multibeam
 from guardrail_core.sensors.trajectory import Trajectory
@@ -126,20 +126,10 @@ def estimate_sensor_height(xyz: np.ndarray) -> float:
     return float(-np.median(inside))
 
 
-def _ordered_by_elevation(ring: np.ndarray, xyz: np.ndarray) -> tuple[np.ndarray, int]:
-    """Rows 0.. for the file's ring numbers, ordered by their median elevation, highest first."""
-    values, row = np.unique(ring, return_inverse=True)
-    elevation = point_elevations_deg(xyz)
-    median = np.array([np.median(elevation[row == k]) for k in range(len(values))])
-    rank = np.empty(len(values), np.int64)
-    rank[np.argsort(-median, kind="stable")] = np.arange(len(values))
-    return rank[row], len(values)
-
-
 def _rings(frame: LidarFrame, table: np.ndarray | None) -> tuple[np.ndarray, int, str]:
     """(N,) row of every point of a frame, the number of rows, and where they came from."""
     if frame.ring is not None:
-        ring, count = _ordered_by_elevation(frame.ring, frame.xyz)
+        ring, count = rows_by_elevation(frame.ring, frame.xyz)
         return ring, count, "ring field"
     if table is not None:
         return rings_from_elevation(frame.xyz, table), len(table), "beam table"

@@ -186,6 +186,34 @@ def point_elevations_deg(xyz: np.ndarray) -> np.ndarray:
     return np.degrees(np.arctan2(xyz[:, 2], np.hypot(xyz[:, 0], xyz[:, 1])))
 
 
+def rows_by_elevation(group: np.ndarray, xyz: np.ndarray) -> tuple[np.ndarray, int]:
+    """Lattice rows for groups of points (a file's ring numbers, a scan's sweeps), ordered by
+    their median elevation, highest first: lattice rows that neighbour are beams that
+    neighbour.
+
+    Parameters
+    ----------
+    group : (N,) int, the group of every point, in any numbering
+    xyz : (N, 3) float, metres, sensor frame
+
+    Returns
+    -------
+    row : (N,) int64, 0 for the highest group
+    rows : the number of groups
+    """
+    values, index = np.unique(group, return_inverse=True)
+    elevation = point_elevations_deg(xyz)
+    order = np.argsort(index, kind="stable")
+    starts = np.searchsorted(index[order], np.arange(len(values)))
+    stops = np.append(starts[1:], len(order))
+    median = np.array(
+        [np.median(elevation[order[a:b]]) for a, b in zip(starts, stops, strict=True)]
+    )
+    rank = np.empty(len(values), np.int64)
+    rank[np.argsort(-median, kind="stable")] = np.arange(len(values))
+    return rank[index], len(values)
+
+
 def rings_from_elevation(xyz: np.ndarray, elevations_deg: np.ndarray) -> np.ndarray:
     """The beam of every point: the one of the nearest elevation in the table, the table first
     moved to where the frame's own beams lie (a unit's calibration moves each beam off the
