@@ -5,7 +5,7 @@ Usage::
 
     .venv/bin/python benchmarks/review_loop.py DRIVE [--model MODEL] [--run RUN]
         [--labels 0,25,50,100,200] [--order queue|random|both] [--seed 0] [--train-seed 0]
-        [--json]
+        [--frame-labels NPZ] [--json]
 
 DRIVE is processed with MODEL (default: the shipped default model) into a run (``--run``: an
 existing run of DRIVE instead). Then, for each order, on a copy of that run, an oracle operator
@@ -29,6 +29,12 @@ label correction) on the rest of the street: every segment the oracle has not la
 counted per segment (``guardrail_f1``) and per point (``guardrail_f1_points``: a segment weighs
 its points, so tiny segments, which the queue leaves out, count for little).
 
+A real frame (``--frame-labels``: its hand labels, ``tests/data/real_frames/``; DRIVE imported
+from that frame alone) takes its truth from the labels (a segment is guardrail when most of its
+judged points are), and the metres of rail found within reach and the share of the points called
+guardrail that lie off guardrails are measured on the rest of the frame too
+(:mod:`guardrail_core.evaluate.labelled_frames`, as ``benchmarks/real_frames.py`` does).
+
 Prints ``{"labels": [...], "guardrail_f1": [...]}`` per order (``--json``), or a table. Goal
 (issue 21): guardrail F >= 0.98 within 100 labels, and the queue reaching it with at most half
 the labels random order needs.
@@ -51,6 +57,13 @@ sys.path.insert(0, str(ROOT))
 
 from guardrail_core.distributed import ClusterSpec  # noqa: E402
 from guardrail_core.evaluate.detection import detection_metrics  # noqa: E402
+from guardrail_core.evaluate.labelled_frames import (  # noqa: E402
+    FrameLabels,
+    found_within,
+    load_frame_labels,
+    off_guardrail_share,
+    rail_metres,
+)
 from guardrail_core.extract.classify import ClassifierParams  # noqa: E402
 from guardrail_core.extract.crop_classifier import GuardrailClassifier  # noqa: E402
 from guardrail_core.extract.model_folder import DEFAULT_MODEL_DIR, load_model  # noqa: E402
@@ -80,6 +93,34 @@ def true_segments(drive: Path, run: Path) -> np.ndarray:
     return segment_truth(truth.point_class, folder.point_segment, len(folder))
 
 
+def labelled_segments(labels: FrameLabels, run: Path) -> np.ndarray:
+    """(S,) bool: the true class of every segment of a real frame's ``run`` from its hand labels
+    (guardrail: most of its judged points are)."""
+    folder = load_run(run)
+    segment = folder.point_segment
+    if len(segment) != len(labels):
+        raise SystemExit(f"{run}: {len(segment)} points, but the labels have {len(labels)}")
+    inside = (segment >= 0) & labels.judged
+    n = len(folder)
+    rail = np.bincount(segment[inside], weights=labels.guardrail[inside], minlength=n)
+    return 2 * rail > np.bincount(segment[inside], minlength=n)
+
+
+def frame_figures(
+    xy: np.ndarray, labels: FrameLabels, run, reviewed: np.ndarray
+) -> tuple[float | None, float]:
+    """Metres found within reach and the off-guardrail share, on the points of the segments not
+    reviewed (and of no segment)."""
+    segment = run.point_segment
+    inside = segment >= 0
+    found = np.zeros(len(segment), bool)
+    found[inside] = run.segments["label"][segment[inside]]
+    counted = np.ones(len(segment), bool)
+    counted[inside] = ~reviewed[segment[inside]]
+    share = found_within(rail_metres(xy, labels, found, counted))
+    return share, off_guardrail_share(labels, found, counted)
+
+
 def points_f1(truth: np.ndarray, predicted: np.ndarray, n_points: np.ndarray) -> float:
     """Guardrail F over points: each segment (S,) counts by its points, as the map's guardrails
     (and an operator's effort on them) do; tiny segments weigh almost nothing."""
@@ -99,11 +140,14 @@ def learning_curve(
     leave_out_contradicted: bool = True,
     train_seed: int = 0,
     model: GuardrailClassifier | None = None,
+    frame: tuple[np.ndarray, FrameLabels] | None = None,
 ) -> dict:
     """Label, fine-tune and measure ``run_dir`` (modified in place) at each count of ``labels``.
 
     ``model`` made the run: every fine-tuning starts from it, with every label given so far,
-    as the app's Train does; None: every one from fresh draws.
+    as the app's Train does; None: every one from fresh draws. ``frame``: the points (N, 2) of
+    a real frame's drive and their hand labels, to measure metres found and the off-guardrail
+    share on the rest of the frame too.
     """
     rng = np.random.default_rng(seed)
     run = load_run(run_dir)
@@ -116,6 +160,8 @@ def learning_curve(
         "guardrail_f1_points": [],
         "seconds": [],
     }
+    if frame is not None:
+        curve["metres_found"], curve["off_guardrail"] = [], []
     for count in labels:
         clock = time.perf_counter()
         need = count - int(reviewed.sum())
@@ -147,6 +193,10 @@ def learning_curve(
         curve["guardrail_f1"].append(round(float(f1), 4))
         curve["guardrail_f1_points"].append(round(points, 4))
         curve["seconds"].append(round(time.perf_counter() - clock, 1))
+        if frame is not None:
+            share, off = frame_figures(*frame, run, reviewed)
+            curve["metres_found"].append(None if share is None else round(share, 4))
+            curve["off_guardrail"].append(round(off, 4))
     reached = [
         n for n, f in zip(curve["labels"], curve["guardrail_f1"], strict=True) if f >= GOAL_F
     ]
@@ -156,7 +206,15 @@ def learning_curve(
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("drive", type=Path, help="a simulated drive (with truth)")
+    parser.add_argument(
+        "drive", type=Path, help="a simulated drive (with truth), or a real frame's drive"
+    )
+    parser.add_argument(
+        "--frame-labels",
+        type=Path,
+        help="the hand labels of a real frame (tests/data/real_frames/*.npz) DRIVE was imported "
+        "from: the oracle's truth, and metres found and the off-guardrail share are measured too",
+    )
     parser.add_argument("--model", type=Path, default=DEFAULT_MODEL_DIR)
     parser.add_argument("--run", type=Path, help="an existing run of DRIVE (else processed here)")
     parser.add_argument("--labels", default="0,25,50,100,200")
@@ -203,7 +261,15 @@ def main() -> int:
             process_drive_folder(
                 args.drive, args.model, run, cluster=ClusterSpec(workers=args.workers)
             )
-        truth = true_segments(args.drive, run)
+        frame = None
+        if args.frame_labels is not None:
+            labels_of_frame = load_frame_labels(args.frame_labels)
+            truth = labelled_segments(labels_of_frame, run)
+            source = open_drive(args.drive, with_truth=False)
+            xyz = source.read_tiles(range(len(source.tiles)))[0].xyz
+            frame = (xyz[:, :2], labels_of_frame)
+        else:
+            truth = true_segments(args.drive, run)
         out["segments"] = len(truth)
         out["guardrail_segments"] = int(truth.sum())
         for order in orders:
@@ -220,6 +286,7 @@ def main() -> int:
                 leave_out_contradicted=not args.keep_contradicted,
                 train_seed=args.train_seed,
                 model=None if args.fresh_head else load_model(args.model),
+                frame=frame,
             )
     if args.json:
         print(json.dumps(out, indent=1))
@@ -236,6 +303,11 @@ def main() -> int:
             )
         for o in orders:
             print(f"{o}: F >= {GOAL_F} after {out[o]['labels_to_goal']} labels")
+            if frame is not None:
+                for n, share, off in zip(
+                    labels, out[o]["metres_found"], out[o]["off_guardrail"], strict=True
+                ):
+                    print(f"{o}, {n} labels: {share:.1%} of the metres found, {off:.1%} off")
     return 0
 
 

@@ -157,3 +157,7 @@ class FrameRangeError(ImportSourceError):
 
 class ExportError(GuardrailError):
     """A run cannot be exported as asked (a mismatched drive, an output that exists)."""
+
+
+class LabelsMismatchError(GuardrailError):
+    """A hand-labels file does not belong to the frame it is used with."""

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import copy
 import dataclasses
+import json
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from datetime import datetime
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -190,6 +192,7 @@ def train_on_set(
     progress_fn: Callable[[float, str], None] | None = None,
     trained_on: dict[str, Any] | None = None,
     start_head: SegmentHead | None = None,
+    crops_from: GuardrailClassifier | None = None,
 ) -> SetTraining:
     """Train the crop classifier and the segment head on a training set.
 
@@ -218,6 +221,9 @@ def train_on_set(
         :func:`~guardrail_core.extract.segment_head.fit_segment_head`): the new head reads the
         features it reads (``head``'s ignored features then choose nothing); the crop
         classifier is trained anew either way
+    crops_from : the model whose crop classifier is kept, unchanged, when the set holds no crop
+        at all (a drive without images: there is nothing to learn it from); the segment head
+        alone is then trained, with every crop probability missing
 
     Returns
     -------
@@ -268,16 +274,20 @@ def train_on_set(
         report(f"embedding {len(crop_rows)} crops")
         assert data.crops is not None
         embeddings = embed_crops(data.crops, progress=progress)
-    report("training the crop classifier")
-    model = train_classifier(
-        None if embeddings is not None else data.crops,
-        data.labels[crop_rows],
-        groups=data.groups[crop_rows],
-        embeddings=embeddings,
-        params=params,
-        trained_on=trained_on,
-        progress=progress,
-    )
+    if len(crop_rows) == 0 and crops_from is not None:
+        report("keeping the crop classifier (no crops to train it on)")
+        model = _kept_crop_classifier(crops_from, trained_on)
+    else:
+        report("training the crop classifier")
+        model = train_classifier(
+            None if embeddings is not None else data.crops,
+            data.labels[crop_rows],
+            groups=data.groups[crop_rows],
+            embeddings=embeddings,
+            params=params,
+            trained_on=trained_on,
+            progress=progress,
+        )
     clock = time.perf_counter()
     crop_proba, missing_folds = _out_of_fold_crop_proba(
         data,
@@ -344,6 +354,21 @@ def train_on_set(
     if progress_fn is not None:
         progress_fn(1.0, "done")
     return SetTraining(model=model, held_out=held, held_out_predicted=held_predicted)
+
+
+def _kept_crop_classifier(start: GuardrailClassifier, trained_on: dict) -> GuardrailClassifier:
+    """A copy of ``start`` (its crop classifier shared, unchanged) with a new record of what it
+    was trained on; its segment head is replaced by the caller."""
+    model = copy.copy(start)
+    created = datetime.now(UTC).replace(microsecond=0)
+    model.info = {
+        **copy.deepcopy(start.info),
+        "created": created.isoformat(),
+        "trained_on": json.loads(json.dumps(trained_on)),
+        "metrics": {"held_out": None},
+        "training": {"crop_classifier": f"kept from {start.version} (no crops)"},
+    }
+    return model
 
 
 def _out_of_fold_crop_proba(

@@ -454,6 +454,7 @@ def train_from_run(
         progress_fn=progress_fn,
         trained_on=trained_on,
         start_head=start_head,
+        crops_from=start_from,
     )
     model, held = trained.model, trained.held_out
     metrics_new = metrics_current = None
