@@ -205,9 +205,7 @@ def main(argv: list[str] | None = None) -> int:
     FIXTURES.mkdir(parents=True, exist_ok=True)
     scan = read_bin(motorway)[:, :3].astype(np.float64)
     labels = label_frame(scan, FRAME_280)
-    write_fixture(
-        FIXTURES / "kitti01_000280.npz", motorway, labels, [b.name for b in FRAME_280]
-    )
+    write_fixture(FIXTURES / "kitti01_000280.npz", motorway, labels, [b.name for b in FRAME_280])
     n_street = len(read_bin(street))
     empty = {
         "guardrail": np.zeros(n_street, bool),

@@ -132,8 +132,7 @@ def print_table(result: dict) -> None:
         share, called = frame["found_share"], frame["guardrail_points"]
         if share is None:
             print(
-                f"  {name}: no guardrail; {called:,} of {frame['points']:,} points called "
-                "guardrail"
+                f"  {name}: no guardrail; {called:,} of {frame['points']:,} points called guardrail"
             )
             continue
         print(

@@ -681,3 +681,53 @@ def test_contradicted_labels_are_left_out_of_training(run_path: Path) -> None:
     assert len(siblings) >= 20
     assert follows["without"] >= 0.9 * len(siblings)
     assert follows["with"] <= 0.1 * len(siblings)
+
+
+def test_a_run_without_images_fine_tunes_its_segment_head_alone(
+    drive_path: Path, tmp_path: Path
+) -> None:
+    """A LiDAR-only drive has no crop to learn from: Train keeps the model's crop classifier and
+    fine-tunes its segment head (it used to stop with 'expected at least 10 labelled crops')."""
+    from guardrail_core.extract.crop_classifier import SEGMENT_PREFIX
+    from guardrail_core.extract.model_folder import DEFAULT_MODEL_DIR
+    from guardrail_core.extract.segment_truth import segment_truth
+    from guardrail_core.formats.drive import load_drive
+    from guardrail_core.process import process_drive
+
+    drive_dir = tmp_path / "drive"
+    shutil.copytree(drive_path, drive_dir)
+    (drive_dir / "images.json").write_text("[]")
+    drive = load_drive(drive_dir)
+    shipped = load_model(DEFAULT_MODEL_DIR)
+    process_drive(drive, shipped, tmp_path / "run")
+    run = load_run(tmp_path / "run")
+    assert not (run.segments["crop_status"] == CROP_OK).any()
+
+    assert drive.truth is not None
+    truth = segment_truth(drive.truth.point_class, run.point_segment, len(run))
+    reviewed = np.flatnonzero(truth)[:15].tolist() + np.flatnonzero(~truth)[:15].tolist()
+    point_labels = np.full(len(run.point_segment), UNLABELLED, np.int8)
+    for s in reviewed:
+        point_labels[run.point_segment == s] = LABEL_GUARDRAIL if truth[s] else LABEL_OTHER
+    with pytest.raises(TrainingDataError, match="labelled crops"):
+        train_from_run(run, point_labels, params=ClassifierParams(mode="fast"))
+    trained = train_from_run(
+        run, point_labels, params=ClassifierParams(mode="fast"), start_from=shipped
+    )
+
+    def split(weights: dict[str, np.ndarray]) -> tuple[dict, dict]:
+        head = {k: v for k, v in weights.items() if k.startswith(SEGMENT_PREFIX)}
+        return {k: v for k, v in weights.items() if k not in head}, head
+
+    new_crops, new_head = split(trained.model.weights())
+    old_crops, old_head = split(shipped.weights())
+    assert new_crops.keys() == old_crops.keys()
+    assert all(np.array_equal(new_crops[k], old_crops[k]) for k in old_crops)
+    assert new_head.keys() == old_head.keys()
+    assert any(not np.array_equal(new_head[k], old_head[k]) for k in old_head)
+    assert trained.model.version != shipped.version
+    assert trained.model.info["training"]["crop_classifier"].startswith(
+        f"kept from {shipped.version}"
+    )
+    predicted = predict_run(run, trained.model)
+    assert predicted["label"].shape == (len(run),)
