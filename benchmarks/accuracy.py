@@ -31,6 +31,13 @@ streets:
   (mean), beam section Hausdorff (median), all in mm;
 - per design: poles and pipes found.
 
+Beside them, ``--multibeam-streets`` (default 3) random 300 m streets of seeds 15001, 15002, ...
+scanned by a spinning multi-beam LiDAR, one frame every 30 m and no camera, as KITTI-like
+deliveries are: long runs (``--long-runs 0.35``), motorway medians (``--medians 0.5``) and cars
+in the lanes beside the car (``--traffic 0.5``), the sensor taking turns through the HDL-64E, the
+Pandar64 and the OS1-128. Their detection is reported apart (no camera: the segment head
+alone decides), with the same targets.
+
 Targets (issue 21): guardrail F >= 0.98, other F >= 0.99; >= 95 % of pipes in view and of poles
 found; radius <= 2 mm, axis <= 5 mm, beam section <= 10 mm, pole position <= 20 mm.
 """
@@ -68,11 +75,19 @@ from guardrail_core.formats.run_folder_paths import RunFolder  # noqa: E402
 from guardrail_core.process import process_drive_folder  # noqa: E402
 from guardrail_core.reconstruct.run_models import load_run_models  # noqa: E402
 from guardrail_core.synth.scene import random_scene_spec  # noqa: E402
-from guardrail_core.synth.simulate import SIMULATOR_VERSION, simulate_drive  # noqa: E402
+from guardrail_core.synth.simulate import (  # noqa: E402
+    SIMULATOR_VERSION,
+    SimulationOptions,
+    simulate_drive,
+)
 
 #: The benchmark's own seeds (see the rule above); street k (1, 2, ...) has seed FIRST_SEED + k - 1.
 FIRST_SEED = 10001
-LAST_SEED = 19999
+LAST_SEED = 14999
+#: The multi-beam streets' seeds: the rest of the benchmark's range.
+MULTIBEAM_FIRST_SEED = 15001
+MULTIBEAM_LAST_SEED = 19999
+MULTIBEAM_SENSORS = ("hdl64e", "pandar64", "os1-128")
 LENGTH_M = 300.0
 BOOTSTRAP = 2000
 TARGETS = {
@@ -94,13 +109,33 @@ def street_seeds(count: int) -> list[int]:
     return list(range(FIRST_SEED, FIRST_SEED + count))
 
 
+def multibeam_seeds(count: int) -> list[int]:
+    """The seeds of the first ``count`` multi-beam streets."""
+    if not 0 <= count <= MULTIBEAM_LAST_SEED - MULTIBEAM_FIRST_SEED + 1:
+        raise SystemExit(
+            f"--multibeam-streets: 0 to {MULTIBEAM_LAST_SEED - MULTIBEAM_FIRST_SEED + 1}"
+        )
+    return list(range(MULTIBEAM_FIRST_SEED, MULTIBEAM_FIRST_SEED + count))
+
+
+def street_spec(seed: int) -> dict:
+    """The scene of benchmark street ``seed``: a profile-scanner street, or (a multi-beam seed)
+    a multi-beam one with medians and traffic, its sensor by turns."""
+    if seed < MULTIBEAM_FIRST_SEED:
+        return random_scene_spec(seed, LENGTH_M)
+    spec = random_scene_spec(seed, LENGTH_M, long_runs=0.35, medians=0.5, traffic=0.5)
+    sensor = MULTIBEAM_SENSORS[(seed - MULTIBEAM_FIRST_SEED) % len(MULTIBEAM_SENSORS)]
+    spec["scanner"] = {"kind": "multibeam", "frame_every_m": 30.0, "sensor": sensor}
+    return spec
+
+
 def ensure_street(data: Path, seed: int) -> Path:
     """The street of ``seed`` under ``data``: simulated the first time, and again when the
     simulator's street for that seed has changed since (its ``truth/scene.yaml`` differs) or
     the simulator itself has (``drive.json``'s ``source.simulator`` is not
     :data:`~guardrail_core.synth.simulate.SIMULATOR_VERSION`)."""
     out = data / f"street_{seed}"
-    spec = random_scene_spec(seed, LENGTH_M)
+    spec = street_spec(seed)
     scene = out / "truth" / "scene.yaml"
     header = out / "drive.json"
     stale = scene.is_file() and (
@@ -111,7 +146,9 @@ def ensure_street(data: Path, seed: int) -> Path:
     if stale or not header.is_file():
         why = "again: the simulator or its street changed" if stale else f"({LENGTH_M:g} m)"
         print(f"simulating {out.name} {why} ...", file=sys.stderr, flush=True)
-        simulate_drive(spec, out, seed=seed, progress=False, overwrite=True)
+        multibeam = seed >= MULTIBEAM_FIRST_SEED  # no camera, as KITTI-like deliveries
+        options = SimulationOptions(image_every_m=1e4) if multibeam else SimulationOptions()
+        simulate_drive(spec, out, seed=seed, options=options, progress=False, overwrite=True)
     return out
 
 
@@ -334,6 +371,21 @@ def report(summary: dict, streets: list[dict]) -> str:
             f"pipes {sm.pipes_found}/{sm.pipes_in_view}, "
             + ("run reused" if s["seconds"] is None else f"processed in {s['seconds']} s")
         )
+    if "multibeam" in summary:
+        mb = summary["multibeam"]
+        lines += [
+            "",
+            f"multi-beam streets (seeds {mb['seeds'][0]}-{mb['seeds'][-1]}; one frame every 30 m, "
+            "no camera, medians and traffic):",
+        ]
+        for name in ("guardrail", "other"):
+            c = mb["detection"][name]
+            lines.append(
+                f"  {name:22s}{c['n_true']:>8d}{c['recall']:>9.3f}{c['precision']:>11.3f}"
+                f"{c['f']:>8.3f}{c['f_95'][0]:>11.3f}-{c['f_95'][1]:.3f}   "
+                f"target >= {TARGETS[name + '_f']} "
+                f"{ok[c['f'] >= TARGETS[name + '_f']]}"
+            )
     return "\n".join(lines)
 
 
@@ -345,6 +397,12 @@ def _causes(counts: dict[str, int]) -> str:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--streets", type=int, default=10, help="how many streets (default 10)")
+    parser.add_argument(
+        "--multibeam-streets",
+        type=int,
+        default=3,
+        help="how many multi-beam streets beside them (default 3; 0: none)",
+    )
     parser.add_argument("--workers", type=int, default=2, help="Dask workers (default 2)")
     parser.add_argument("--data", type=Path, default=ROOT / "benchmarks" / "data" / "accuracy")
     parser.add_argument("--json", action="store_true", help="print one JSON object instead")
@@ -370,8 +428,8 @@ def main() -> int:
     )
     args = parser.parse_args()
     args.data.mkdir(parents=True, exist_ok=True)
-    streets = []
-    for seed in street_seeds(args.streets):
+    streets, multibeam = [], []
+    for seed in street_seeds(args.streets) + multibeam_seeds(args.multibeam_streets):
         drive = ensure_street(args.data, seed)
         print(f"processing {drive.name} ...", file=sys.stderr, flush=True)
         result = measure_street(
@@ -382,12 +440,17 @@ def main() -> int:
             settings=args.set,
             model=args.model or DEFAULT_MODEL_DIR,
         )
-        streets.append({"seed": seed, **result})
+        (streets if seed < MULTIBEAM_FIRST_SEED else multibeam).append({"seed": seed, **result})
     summary = {**summarise(streets), "model": str(args.model or "default")}
+    if multibeam:
+        summary["multibeam"] = {
+            "seeds": [s["seed"] for s in multibeam],
+            "detection": pooled_detection(multibeam, np.random.default_rng(0)),
+        }
     document = {
         **{k: v for k, v in summary.items() if k != "misses"},
         "misses": summary["misses"].to_json(),
-        "streets": [{**s, "misses": s["misses"].to_json()} for s in streets],
+        "streets": [{**s, "misses": s["misses"].to_json()} for s in streets + multibeam],
         "machine": {"cpus": os.cpu_count(), "platform": platform.platform()},
     }
     if args.save:

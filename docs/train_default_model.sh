@@ -39,7 +39,9 @@ done
 for seed in 111 112 113 114; do
     simulate street_$seed --seed $seed --length 300
 done
-mb="--length 300 --long-runs 0.35 --scanner multibeam --frame-every 30 --image-every 10000"
+# Multi-beam streets hold what real ones do: motorway medians (two beams back to back, a hedge
+# between) and cars in the lanes beside the car; two of them are scanned by other sensors.
+mb="--length 300 --long-runs 0.35 --scanner multibeam --frame-every 30 --image-every 10000 --medians 0.6 --traffic 0.5"
 for seed in 501 502 503 504; do
     simulate mb_$seed --seed $seed $mb
 done
@@ -47,13 +49,15 @@ simulate mb_505 --seed 505 $mb --range-noise 0.03 --dropout 0.1 --intensity-gain
 simulate mb_506 --seed 506 $mb --range-noise 0.04 --dropout 0.05 --intensity-gain 1.4
 simulate mb_507 --seed 507 $mb --range-noise 0.03 --dropout 0.15 --intensity-gain 0.7
 simulate mb_508 --seed 508 $mb --range-noise 0.025 --dropout 0.08 --intensity-gain 2.0
+simulate mb_509 --seed 509 $mb --lidar pandar64
+simulate mb_510 --seed 510 $mb --lidar os1-128 --range-noise 0.02
 # Roads like the KITTI car's: W-beam and thrie-beam guardrails only.
 beams="--designs beam_w,beam_thrie"
 simulate mbb_511 --seed 511 $mb $beams
 simulate mbb_512 --seed 512 $mb $beams
 simulate mbb_513 --seed 513 $mb $beams --range-noise 0.03 --dropout 0.1 --intensity-gain 0.6
 simulate mbb_514 --seed 514 $mb $beams --range-noise 0.03 --dropout 0.08 --intensity-gain 1.6
-.venv/bin/guardrail train "$work"/train_10? "$work"/street_11? "$work"/mb_50? "$work"/mbb_51? --out "$work/model" \
+.venv/bin/guardrail train "$work"/train_10? "$work"/street_11? "$work"/mb_5?? "$work"/mbb_51? --out "$work/model" \
     --ignore-features intensity_mean,intensity_std --overwrite
 # Record in model.json how each training drive was simulated.
 .venv/bin/python - "$work" <<'EOF'

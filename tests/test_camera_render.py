@@ -11,7 +11,12 @@ from guardrail_core.classes import TruthClass
 from guardrail_core.geom.frames import make_transform, rotation_from_euler, transform_points
 from guardrail_core.geom.mesh import box, grid_surface, sphere
 from guardrail_core.sensors.camera import Camera
-from guardrail_core.synth.camera_render import Lighting, random_lighting, render_image
+from guardrail_core.synth.camera_render import (
+    Lighting,
+    random_lighting,
+    random_night_lighting,
+    render_image,
+)
 from guardrail_core.synth.camera_rig import default_camera_rig
 from guardrail_core.synth.mesh import MeshBuilder
 from guardrail_core.synth.raycast import SceneRaycaster
@@ -272,3 +277,29 @@ def test_random_lighting_ranges():
         assert light.haze_distance_m > 50.0
         overcast += light.sun_intensity < 0.3 and light.ambient > 0.5
     assert 20 <= overcast <= 90
+
+
+def test_at_night_the_lamps_light_what_is_near(small_rig):
+    """Night: the road 5 m ahead is lit by the vehicle's lamps, 40 m ahead it is dark, and the
+    frame is far darker than by day; the sky is no brighter than the near road."""
+    cam, rays = next((c, r) for c, r in small_rig if c.name == "front")
+    T = world_camera(cam)
+    builder = MeshBuilder()
+    ground(builder, material="concrete")
+    scene = SceneRaycaster(builder.build())
+    night = dataclasses.replace(
+        random_night_lighting(np.random.default_rng(1)), white_balance=(1.0, 1.0, 1.0)
+    )
+    assert night.sun_intensity == 0 and night.headlight > 0 and night.exposure >= 3
+    image, _ = render_image(scene, cam, T, night, np.random.default_rng(2), pixel_rays=rays)
+    day, _ = render_image(scene, cam, T, sunny(), np.random.default_rng(2), pixel_rays=rays)
+    heading = T_WORLD_VEHICLE[:3, 0]
+    road = T_WORLD_VEHICLE[:3, 3] * [1, 1, 0]
+    uv, _ = cam.project(np.array([road + 5.0 * heading, road + 40.0 * heading]), T)
+    assert cam.inside(uv).all()
+    near, far = luminance(image, uv[0]), luminance(image, uv[1])
+    assert near > 2 * far, (near, far)  # sRGB: about five times the light
+    assert image.mean() < 0.6 * day.mean()
+    assert luminance(image, np.array([cam.width / 2, 3])) < near
+    # By day the lamps do nothing: a day's lighting has none.
+    assert random_lighting(np.random.default_rng(0)).headlight == 0.0

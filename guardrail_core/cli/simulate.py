@@ -117,6 +117,29 @@ def add_parser(subparsers: common.Subparsers) -> None:
         "lower than its design, as real guardrails stand (default 0: every run as designed)",
     )
     own.add_argument(
+        "--night",
+        action="store_true",
+        help="take the images at night: no sun, the vehicle's lamps light what is near, the "
+        "camera's gain turned up",
+    )
+    own.add_argument(
+        "--medians",
+        type=float,
+        default=0.0,
+        metavar="SHARE",
+        help="share (0-1) of a random scene's left-side beam runs that are a motorway median: "
+        "a second beam back to back, facing the other carriageway, with a hedge between "
+        "(default 0)",
+    )
+    own.add_argument(
+        "--traffic",
+        type=float,
+        default=0.0,
+        metavar="SHARE",
+        help="cars in the lanes beside the vehicle's, one every 10-45 m kept with this "
+        "probability (0-1; default 0: none)",
+    )
+    own.add_argument(
         "--curb-height",
         type=float,
         metavar="METRES",
@@ -150,6 +173,8 @@ def run(args: argparse.Namespace) -> int:
             (args.long_runs != 0.0, "--long-runs"),
             (args.curb_height is not None, "--curb-height"),
             (args.height_jitter != 0.0, "--height-jitter"),
+            (args.medians != 0.0, "--medians"),
+            (args.traffic != 0.0, "--traffic"),
         ):
             if given:
                 print(
@@ -166,6 +191,8 @@ def run(args: argparse.Namespace) -> int:
             long_runs=args.long_runs,
             curb_height=args.curb_height,
             height_jitter=args.height_jitter,
+            medians=args.medians,
+            traffic=args.traffic,
         )
     scanner = dict(spec.get("scanner") or {})
     if args.lidar is not None and args.scanner == "profile":
@@ -188,7 +215,10 @@ def run(args: argparse.Namespace) -> int:
     from guardrail_core.formats.drive_tiles import DEFAULT_DRIVE_TILE_M
 
     options = SimulationOptions(
-        image_every_m=args.image_every, image_size=args.image_size, compress=not args.las
+        image_every_m=args.image_every,
+        image_size=args.image_size,
+        compress=not args.las,
+        night=args.night,
     )
     scene_file = Path(args.scene) if args.scene and Path(args.scene).is_file() else None
     summary = simulate_drive(

@@ -41,6 +41,8 @@ class Lighting:
     white_balance : (3,) per-channel RGB gains of the camera
     haze_distance_m : float, metres at which haze has replaced 63% of a surface's radiance
     sun_colour : (3,) linear RGB tint of direct sunlight (warmer when the sun is low)
+    headlight : float, irradiance of the vehicle's lamps (at the camera) on a surface facing
+        them 10 m away, falling off with the square of the distance (0 by day)
     """
 
     sun_direction: Vec3
@@ -52,6 +54,7 @@ class Lighting:
     white_balance: Vec3
     haze_distance_m: float
     sun_colour: Vec3 = (1.0, 1.0, 1.0)
+    headlight: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -201,9 +204,31 @@ def random_lighting(rng: np.random.Generator) -> Lighting:
     )
 
 
+def random_night_lighting(rng: np.random.Generator) -> Lighting:
+    """Night: no sun, a faint sky glow, the vehicle's own lamps lighting what is near, and the
+    camera's gain turned up (the sensor noise grows with it)."""
+    glow = rng.uniform(0.004, 0.02)
+    wb = rng.normal(1.0, 0.06, 3)
+    wb = np.clip(wb / wb[1], 0.85, 1.15)
+    return Lighting(
+        sun_direction=(0.0, 0.0, -1.0),
+        sun_intensity=0.0,
+        ambient=float(rng.uniform(0.003, 0.015)),
+        sky_zenith=(glow * 0.5, glow * 0.6, glow),
+        sky_horizon=(glow * 1.6, glow * 1.3, glow),  # sodium-orange city glow on the horizon
+        exposure=float(rng.uniform(3.0, 8.0)),
+        white_balance=_vec3(wb),
+        haze_distance_m=float(rng.uniform(150.0, 600.0)),
+        headlight=float(rng.uniform(0.012, 0.03)),
+    )
+
+
 # --------------------------------------------------------------------------------------------
 # Procedural texture
 # --------------------------------------------------------------------------------------------
+
+#: Linear RGB tint of halogen and LED headlamps (slightly warm).
+_LAMP_COLOUR = (1.0, 0.95, 0.85)
 
 _HASH_X, _HASH_Y, _HASH_Z = np.uint32(0x8DA6B343), np.uint32(0xD8163841), np.uint32(0xCB1AB31F)
 
@@ -442,6 +467,9 @@ def _shade_hits(
     ambient = np.float32(lighting.ambient) * up_factor
 
     rad = albedo * (direct[:, None] * sun_colour + ambient[:, None] * sky_colour)
+    if lighting.headlight > 0:  # the lamps sit at the camera: lit as seen, fading with distance
+        lamp = np.float32(lighting.headlight) * cos_view * (10.0 / np.maximum(t, 2.0)) ** 2
+        rad += albedo * lamp[:, None] * np.array(_LAMP_COLOUR, np.float32)
 
     specular = _SPECULAR[material]
     glossy = specular > 0

@@ -13,7 +13,11 @@ import numpy as np
 from guardrail_core.formats.drive import ImageRecord
 from guardrail_core.sensors.camera import Camera
 from guardrail_core.sensors.trajectory import Trajectory
-from guardrail_core.synth.camera_render import random_lighting, render_image
+from guardrail_core.synth.camera_render import (
+    random_lighting,
+    random_night_lighting,
+    render_image,
+)
 from guardrail_core.synth.raycast import SceneRaycaster
 
 
@@ -31,18 +35,25 @@ class ShotWriter:
     """Renders shots of every camera into ``folder`` (``images/CAMERA/NNNNNN.jpg`` and
     ``truth/masks/CAMERA/NNNNNN.png``), numbering them on from call to call.
 
-    ``rng`` draws one sun for the whole drive, then each image's exposure and sensor noise in
-    shot order, so the images do not depend on how the shots are split between calls.
+    ``rng`` draws one sun (``night``: the vehicle's lamps) for the whole drive, then each
+    image's exposure and sensor noise in shot order, so the images do not depend on how the
+    shots are split between calls.
     """
 
     def __init__(
-        self, cameras: list[Camera], folder: Path, rng: np.random.Generator, jpeg_quality: int
+        self,
+        cameras: list[Camera],
+        folder: Path,
+        rng: np.random.Generator,
+        jpeg_quality: int,
+        night: bool = False,
     ) -> None:
         self.cameras = cameras
         self.folder = Path(folder)
         self.rng = rng
         self.jpeg_quality = jpeg_quality
-        self.lighting = random_lighting(rng)  # exposure varies per shot
+        # exposure varies per shot
+        self.lighting = random_night_lighting(rng) if night else random_lighting(rng)
         self.records: list[ImageRecord] = []
         self._shots = 0
         self._rays: dict[str, np.ndarray] = {}  # each camera's pixel rays, made at its first shot

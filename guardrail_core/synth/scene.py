@@ -38,6 +38,7 @@ from guardrail_core.synth.road import SIDES, Road, Roadside, RoadSpec
 from guardrail_core.synth.scanner import ReturnModel
 from guardrail_core.synth.scene_parts import ScenePart, guardrail_parts, object_parts, road_parts
 from guardrail_core.synth.spec_values import spec_value
+from guardrail_core.synth.street_traffic import add_medians, add_traffic
 from guardrail_core.synth.vehicle import VehicleParams
 
 SCENES_DIR = Path(__file__).resolve().parents[2] / "data_samples" / "scenes"
@@ -416,6 +417,8 @@ def random_scene_spec(
     long_runs: float = 0.0,
     curb_height: float | None = None,
     height_jitter: float = 0.0,
+    medians: float = 0.0,
+    traffic: float = 0.0,
 ) -> dict:
     """A random street ``length`` metres long (plus run-in and run-out) mixing every design and kind.
 
@@ -429,6 +432,10 @@ def random_scene_spec(
     ``1 + U(-height_jitter, height_jitter)`` times as tall as its design (``height_scale``), as real
     guardrails of one design stand at different heights; drawn from a stream of its own, and with
     0 no run has a ``height_scale``.
+    ``medians`` (0-1): that share of the left side's beam runs are a median's near rail, with a
+    second rail back to back and a hedge between (:func:`~.street_traffic.add_medians`);
+    ``traffic`` (0-1): cars in the lanes beside the vehicle's (:func:`~.street_traffic.add_traffic`);
+    each from a stream of its own.
     ``roadside``: the verges get embankments, ditches, hedges, shrubs and tall grass
     (:func:`_green_roadside`), drawn from a stream of their own: the road, guardrails and other
     objects are those of the same seed without them.
@@ -439,6 +446,9 @@ def random_scene_spec(
         raise SceneSpecError(f"--long-runs: a share from 0 to 1, got {long_runs}")
     if not 0.0 <= height_jitter <= 0.5:
         raise SceneSpecError(f"--height-jitter: 0 to 0.5, got {height_jitter}")
+    for name, share in (("--medians", medians), ("--traffic", traffic)):
+        if not 0.0 <= share <= 1.0:
+            raise SceneSpecError(f"{name}: a share from 0 to 1, got {share}")
     if curb_height is not None and not 0.0 <= curb_height <= 0.5:
         raise SceneSpecError(f"--curb-height: 0 to 0.5 m, got {curb_height}")
     shipped = list_designs()
@@ -573,6 +583,12 @@ def random_scene_spec(
             np.random.default_rng([seed, 21]), guardrails, sidewalk, total
         )
         objects.extend(green)
+    # After the roadside: its stream draws per run of the plain street.
+    if medians > 0:
+        add_medians(guardrails, objects, medians, np.random.default_rng([seed, 24]))
+    if traffic > 0:
+        span = (margin, margin + length)
+        add_traffic(objects, road, vehicle_lane, span, traffic, np.random.default_rng([seed, 25]))
     return {
         "name": f"random-{seed}",
         "crs": DEFAULT_CRS,

@@ -31,6 +31,8 @@ from guardrail_core.synth.vegetation import (
     vegetation_sizes,
 )
 
+#: Which way a run's beams face: the road beside it, or away (a median's far rail).
+FACINGS = ("road", "away")
 #: Mesh rows of road per part: 25 m at the road mesh's 0.5 m rows.
 ROAD_ROWS_PER_PART = 50
 
@@ -100,7 +102,12 @@ def guardrail_parts(items: list, road: Road, seed: int, first_id: int) -> list[S
             start=spec_value(item, "start", float, where),
             length=spec_value(item, "length", float, where),
             spacing=spec_value(item, "pole_spacing", float, where, design.unit_length),
+            facing=spec_value(item, "facing", str, where, "road"),
         )
+        if run.facing not in FACINGS:
+            raise SceneSpecError(
+                f"{where}.facing: {run.facing!r}; expected one of {', '.join(FACINGS)}"
+            )
         if run.spacing <= 0.3 or run.length < run.spacing:
             raise SceneSpecError(
                 f"{where}: length {run.length} m must hold at least one pole spacing "
@@ -200,12 +207,15 @@ class _GuardrailRun:
     start: float
     length: float
     spacing: float
+    facing: str = "road"
 
     def __call__(self, builder: MeshBuilder) -> dict:
         paint = spec_paint(self.item, self.where, part_rng(self.seed, self.object_id))
         poles, toward_road = _poles_along(
             self.road, self.side, self.offset, self.start, self.length, self.spacing
         )
+        if self.facing == "away":  # a median's far rail: its beams face the other carriageway
+            toward_road = -toward_road
         record = build_guardrail_run(
             self.design, poles, toward_road, paint=paint, object_id=self.object_id, builder=builder
         )
@@ -217,6 +227,8 @@ class _GuardrailRun:
                 "pole_spacing": self.spacing,
             }
         )
+        if self.facing != "road":
+            record["facing"] = self.facing
         if self.height_scale != 1.0:  # only then: a drive of unscaled designs keeps its truth
             record["height_scale"] = self.height_scale
         return record

@@ -52,6 +52,7 @@ class SimulationOptions:
     image_size : (width, height) pixels of every camera
     jpeg_quality : int, 0-100
     compress : bool, LAZ (True) or LAS (False)
+    night : bool, the images taken at night, lit by the vehicle's lamps
     scene_window_m : float, metres of driving scanned against one build of the scene near them
         (memory against rebuilding: a window holds the scene within the scanner's range, 120 m,
         of it; the points do not depend on it)
@@ -62,6 +63,7 @@ class SimulationOptions:
     jpeg_quality: int = 92
     compress: bool = True
     scene_window_m: float = 200.0
+    night: bool = False
 
     def __post_init__(self) -> None:
         width, height = self.image_size
@@ -155,7 +157,11 @@ def simulate_drive(
         cameras = default_camera_rig(width=options.image_size[0], height=options.image_size[1])
         shots = shot_times(trajectory, options.image_every_m)
         shooter = ShotWriter(
-            cameras, staging, np.random.default_rng(camera_seq), options.jpeg_quality
+            cameras,
+            staging,
+            np.random.default_rng(camera_seq),
+            options.jpeg_quality,
+            night=options.night,
         )
         writer = TiledPointWriter(
             staging,
@@ -218,6 +224,7 @@ def simulate_drive(
                     "seed": seed,
                     "scene": layout.spec.get("name", "scene"),
                     "image_every_m": options.image_every_m,
+                    **({"night": True} if options.night else {}),
                 },
             )
             (staging / "truth" / "scene.yaml").write_text(
