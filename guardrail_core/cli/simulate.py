@@ -140,6 +140,14 @@ def add_parser(subparsers: common.Subparsers) -> None:
         "probability (0-1; default 0: none)",
     )
     own.add_argument(
+        "--young-trees",
+        type=float,
+        default=0.0,
+        metavar="SHARE",
+        help="young trees on stakes (and, half the time, a low hedge) close behind that share "
+        "(0-1) of a random scene's pipe railings, as along town kerbs (default 0)",
+    )
+    own.add_argument(
         "--curb-height",
         type=float,
         metavar="METRES",
@@ -175,6 +183,7 @@ def run(args: argparse.Namespace) -> int:
             (args.height_jitter != 0.0, "--height-jitter"),
             (args.medians != 0.0, "--medians"),
             (args.traffic != 0.0, "--traffic"),
+            (args.young_trees != 0.0, "--young-trees"),
         ):
             if given:
                 print(
@@ -193,6 +202,7 @@ def run(args: argparse.Namespace) -> int:
             height_jitter=args.height_jitter,
             medians=args.medians,
             traffic=args.traffic,
+            young_trees=args.young_trees,
         )
     scanner = dict(spec.get("scanner") or {})
     if args.lidar is not None and args.scanner == "profile":

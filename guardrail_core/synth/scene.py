@@ -31,6 +31,7 @@ from guardrail_core.sensors.scanner import (
 )
 from guardrail_core.synth.confounders import CONFOUNDER_KINDS
 from guardrail_core.synth.designs import list_designs, load_design
+from guardrail_core.synth.kerb_planting import add_kerb_planting
 from guardrail_core.synth.materials import PAINTS
 from guardrail_core.synth.mesh import MeshBuilder, SceneMesh
 from guardrail_core.synth.multibeam import MultibeamParams
@@ -419,6 +420,7 @@ def random_scene_spec(
     height_jitter: float = 0.0,
     medians: float = 0.0,
     traffic: float = 0.0,
+    young_trees: float = 0.0,
 ) -> dict:
     """A random street ``length`` metres long (plus run-in and run-out) mixing every design and kind.
 
@@ -435,7 +437,8 @@ def random_scene_spec(
     ``medians`` (0-1): that share of the left side's beam runs are a median's near rail, with a
     second rail back to back and a hedge between (:func:`~.street_traffic.add_medians`);
     ``traffic`` (0-1): cars in the lanes beside the vehicle's (:func:`~.street_traffic.add_traffic`);
-    each from a stream of its own.
+    ``young_trees`` (0-1): young trees and low hedges close behind that share of the pipe runs
+    (:func:`~.kerb_planting.add_kerb_planting`); each from a stream of its own.
     ``roadside``: the verges get embankments, ditches, hedges, shrubs and tall grass
     (:func:`_green_roadside`), drawn from a stream of their own: the road, guardrails and other
     objects are those of the same seed without them.
@@ -446,7 +449,11 @@ def random_scene_spec(
         raise SceneSpecError(f"--long-runs: a share from 0 to 1, got {long_runs}")
     if not 0.0 <= height_jitter <= 0.5:
         raise SceneSpecError(f"--height-jitter: 0 to 0.5, got {height_jitter}")
-    for name, share in (("--medians", medians), ("--traffic", traffic)):
+    for name, share in (
+        ("--medians", medians),
+        ("--traffic", traffic),
+        ("--young-trees", young_trees),
+    ):
         if not 0.0 <= share <= 1.0:
             raise SceneSpecError(f"{name}: a share from 0 to 1, got {share}")
     if curb_height is not None and not 0.0 <= curb_height <= 0.5:
@@ -589,6 +596,8 @@ def random_scene_spec(
     if traffic > 0:
         span = (margin, margin + length)
         add_traffic(objects, road, vehicle_lane, span, traffic, np.random.default_rng([seed, 25]))
+    if young_trees > 0:
+        add_kerb_planting(guardrails, objects, young_trees, np.random.default_rng([seed, 26]))
     return {
         "name": f"random-{seed}",
         "crs": DEFAULT_CRS,

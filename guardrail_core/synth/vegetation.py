@@ -1,4 +1,5 @@
-"""Roadside vegetation: clipped hedges, shrubs and patches of tall grass, laid on the ground.
+"""Roadside vegetation: clipped hedges, shrubs, patches of tall grass and young trees, laid on
+the ground.
 
 Real roadsides are green: hedges planted right behind guardrails (the planting strips between a
 road and its sidewalk, the hedge in a motorway's median), shrubs on the verge, grass no one has
@@ -17,11 +18,11 @@ from __future__ import annotations
 import numpy as np
 
 from guardrail_core.classes import TruthClass
-from guardrail_core.geom.mesh import grid_surface, sphere
+from guardrail_core.geom.mesh import cylinder, grid_surface, sphere
 from guardrail_core.synth.mesh import MeshBuilder
 from guardrail_core.synth.road import SIDES, Road
 
-VEGETATION_KINDS = ("hedge", "shrub", "tall_grass")
+VEGETATION_KINDS = ("hedge", "shrub", "tall_grass", "young_tree")
 #: Kinds that run ``length`` metres along the road from ``at``.
 EXTENDED_VEGETATION = frozenset({"hedge", "tall_grass"})
 #: Spec keys of each kind's size (metres) and the range a size left open is drawn from.
@@ -29,6 +30,7 @@ SIZES: dict[str, dict[str, tuple[float, float]]] = {
     "hedge": {"height": (0.6, 1.4), "depth": (0.5, 1.0)},
     "shrub": {"height": (0.5, 1.8), "width": (0.6, 2.0)},
     "tall_grass": {"height": (0.15, 0.8), "width": (1.0, 4.0)},
+    "young_tree": {"height": (2.2, 4.0), "width": (0.6, 1.6)},
 }
 #: Metres between a hedge's mesh rows along the road (leaf-scale roughness).
 ROW_STEP_M = 0.06
@@ -81,17 +83,18 @@ def build_vegetation(
         p[:, 2] += up
         return p.reshape(*shape, 3)
 
-    cls = TruthClass.VEGETATION
+    cls = TruthClass.TREE if kind == "young_tree" else TruthClass.VEGETATION
     if kind == "hedge":
-        mesh = _hedge(ground, end - at, sizes["height"], sizes["depth"], at, rng)
-        material = "hedge"
+        pieces = [(_hedge(ground, end - at, sizes["height"], sizes["depth"], at, rng), "hedge")]
     elif kind == "shrub":
-        mesh = _shrub(ground, at, sizes["height"], sizes["width"], rng)
-        material = "hedge"
+        pieces = [(_shrub(ground, at, sizes["height"], sizes["width"], rng), "hedge")]
+    elif kind == "young_tree":
+        pieces = _young_tree(ground, at, sizes["height"], sizes["width"], rng)
     else:
-        mesh = _tall_grass(ground, end - at, sizes["height"], sizes["width"], at, rng)
-        material = "tall_grass"
-    builder.add(mesh, cls=cls, object_id=int(object_id), material=material)
+        grass = _tall_grass(ground, end - at, sizes["height"], sizes["width"], at, rng)
+        pieces = [(grass, "tall_grass")]
+    for mesh, material in pieces:
+        builder.add(mesh, cls=cls, object_id=int(object_id), material=material)
     geometry: dict = {"base": ground(np.array(at), np.array(0.0), np.array(0.0)).tolist()}
     if kind in EXTENDED_VEGETATION:
         geometry["length"] = float(end - at)
@@ -165,3 +168,26 @@ def _tall_grass(ground, length: float, height: float, width: float, at: float, r
     verts, faces = grid_surface(ground(at + a[:, None], c[None, :], up))
     kept = rng.random(len(faces)) >= 0.35
     return verts, faces[kept]
+
+
+def _young_tree(ground, at: float, height: float, width: float, rng) -> list[tuple]:
+    """A young street tree: a trunk 5-10 cm thick (a railing post's girth) tied to a stake
+    beside it, and a small lumpy crown from 1.3-2.0 m up to ``height``; (mesh, material) pieces.
+    """
+    foot = ground(np.array(at), np.array(0.0), np.array(-0.05))
+    up = np.array([0.0, 0.0, 1.0])
+    crown_base = float(rng.uniform(1.3, 2.0))
+    crown_h = max(height - crown_base, 0.5)
+    trunk = cylinder(
+        foot, foot + (crown_base + 0.5 * crown_h) * up, float(rng.uniform(0.025, 0.05))
+    )
+    side = rng.normal(size=2)
+    side = np.r_[side / np.linalg.norm(side), 0.0] * 0.15
+    stake = cylinder(foot + side, foot + side + float(rng.uniform(1.4, 1.9)) * up, 0.03, sections=8)
+    verts, faces = sphere(np.zeros(3), 1.0, subdivisions=2)
+    lumps = _waves(rng, 5, (0.8, 2.5), 0.3)
+    angle = np.arctan2(verts[:, 1], verts[:, 0])
+    scale = 1.0 + lumps(verts[:, 2] * 2.0, angle) + rng.normal(0.0, 0.04, len(verts))
+    radii = np.array([width / 2, width / 2, crown_h / 2])
+    crown = foot + (crown_base + crown_h / 2) * up + verts * radii * scale[:, None]
+    return [(trunk, "bark"), (stake, "bark"), ((crown, faces), "foliage")]
