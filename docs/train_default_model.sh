@@ -1,19 +1,20 @@
 #!/bin/sh
-# Make a default model (guardrail_core/models/default): twelve simulated drives of the paper's
-# profile scanner with cameras (eight of 150 m, four of 300 m) and twelve of a multi-beam
-# scanner (a Velodyne HDL-64E as on the KITTI car, one frame every 30 m, no images), four of
-# those on roads with W-beam and thrie-beam guardrails only, as the KITTI car meets them; fast
-# mode. The streets have green roadsides (embankments, ditches, hedges behind the rails, shrubs,
-# tall grass); on the 150 m and the multi-beam drives a third of the guardrail runs are 40-120 m
-# long (--long-runs 0.35); some drives of each scanner are noisier and sparser than the
-# scanner's defaults and calibrated differently (range noise, dropouts, intensity gain), as real
-# deliveries are, and the segment head leaves the intensities unread (each scanner calibrates
-# them otherwise). About 75 minutes on 2 cores (the cameras some 40, the segment head's three
-# members some 23). The model shipped now is this script's, made on 2026-11-27 (before chains;
-# run again on 2026-11-29, with chains or without, its model lost the far half of the KITTI
-# motorway's W-beam and was not shipped: README, *Chains of pieces*). Check a model
-# before copying it:
+# Make a default model (guardrail_core/models/default): thirteen simulated drives of the
+# paper's profile scanner with cameras (nine of 150 m, four of 300 m; the 300 m town streets
+# with young trees and low hedges close behind half their pipe railings, one 150 m street at
+# night) and fourteen of multi-beam scanners (one frame every 30 m, no images: twelve of a
+# Velodyne HDL-64E as on the KITTI car, four of those on roads with W-beam and thrie-beam
+# guardrails only, one of a Pandar64 and one of an OS1-128), with motorway medians and cars in
+# the lanes beside the car; fast mode. The streets have green roadsides (embankments, ditches,
+# hedges behind the rails, shrubs, tall grass); on the 150 m and the multi-beam drives a third
+# of the guardrail runs are 40-120 m long (--long-runs 0.35); some drives of each scanner are
+# noisier and sparser than the scanner's defaults and calibrated differently (range noise,
+# dropouts, intensity gain), as real deliveries are, and the segment head leaves the
+# intensities unread (each scanner calibrates them otherwise). About 80 minutes on 2 cores.
+# Check a model before copying it, on the labelled real frames and the simulated streets:
+#   .venv/bin/python benchmarks/real_frames.py --model WORK_DIR/model
 #   .venv/bin/python benchmarks/kitti_vegetation.py --model WORK_DIR/model
+#   .venv/bin/python benchmarks/accuracy.py --model WORK_DIR/model
 #   and tests/test_kitti_end_to_end.py with it in guardrail_core/models/default
 # Usage: sh docs/train_default_model.sh [WORK_DIR]   (run from the repository root)
 set -e
@@ -36,9 +37,12 @@ simulate train_104 --seed 104 --length 150 --long-runs 0.35 --range-noise 0.008 
 for seed in 105 106 107 108; do
     simulate train_$seed --seed $seed --length 150 --long-runs 0.35
 done
+# Town streets: young trees on stakes and low hedges close behind half the pipe railings; one
+# of them at night, lit by the vehicle's lamps.
 for seed in 111 112 113 114; do
-    simulate street_$seed --seed $seed --length 300
+    simulate street_$seed --seed $seed --length 300 --young-trees 0.5
 done
+simulate street_115 --seed 115 --length 150 --long-runs 0.35 --young-trees 0.5 --night
 # Multi-beam streets hold what real ones do: motorway medians (two beams back to back, a hedge
 # between) and cars in the lanes beside the car; two of them are scanned by other sensors.
 mb="--length 300 --long-runs 0.35 --scanner multibeam --frame-every 30 --image-every 10000 --medians 0.6 --traffic 0.5"

@@ -28,7 +28,11 @@ from guardrail_core.errors import (
 from guardrail_core.formats.drive import load_drive
 from guardrail_core.formats.run_folder import load_run
 from guardrail_core.geom.frames import invert_transform
-from guardrail_core.importers.lidar import estimate_sensor_height, import_lidar
+from guardrail_core.importers.lidar import (
+    estimate_road_grade,
+    estimate_sensor_height,
+    import_lidar,
+)
 from guardrail_core.importers.lidar_frames import read_lidar_frame
 from guardrail_core.sensors.lidar_models import LIDAR_MODELS, rings_from_elevation
 from guardrail_core.synth.scene import MULTIBEAM_HEIGHT_M
@@ -168,6 +172,13 @@ def test_the_sensor_height_is_measured_from_the_road_under_it() -> None:
     assert estimate_sensor_height(np.concatenate([road, wall])) == pytest.approx(1.95, abs=0.01)
     with pytest.raises(SourceFormatError, match="--sensor-height"):
         estimate_sensor_height(wall)
+    # A sensor pitched 0.6 degree nose down sees the road rise 1 % ahead; a wall changes nothing.
+    tilted = road.copy()
+    tilted[:, 2] += 0.01 * tilted[:, 0]
+    assert estimate_road_grade(np.concatenate([tilted, wall]), 1.95) == pytest.approx(
+        0.01, abs=5e-4
+    )
+    assert estimate_road_grade(wall, 1.95) == 0.0
 
 
 def _write(path: Path, text: str | bytes) -> Path:

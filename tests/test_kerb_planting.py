@@ -39,9 +39,10 @@ def test_young_trees_stand_behind_pipe_railings_and_leave_the_street_as_it_was()
 
 def test_a_young_tree_is_a_thin_trunk_a_stake_and_a_crown() -> None:
     spec = random_scene_spec(1, 40.0)
-    spec["guardrails"], spec["objects"] = [], [
-        {"kind": "young_tree", "side": "left", "offset": 1.0, "at": 20.0, "height": 3.0}
-    ]
+    spec["guardrails"], spec["objects"] = (
+        [],
+        [{"kind": "young_tree", "side": "left", "offset": 1.0, "at": 20.0, "height": 3.0}],
+    )
     scene = build_scene(spec, seed=1)
     (tree,) = (o for o in scene.objects if o["kind"] == "young_tree")
     assert tree["class"] == TruthClass.TREE and tree["geometry"]["height"] == 3.0

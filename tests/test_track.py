@@ -83,8 +83,41 @@ def test_beyond_the_ends_continues_along_the_end_tangents() -> None:
 
     np.testing.assert_allclose(track.station, station, rtol=0, atol=1e-9)
     np.testing.assert_allclose(track.lateral, lateral, rtol=0, atol=1e-9)
-    # The road height stays at the end samples' height beyond the ends.
     np.testing.assert_allclose(track.height, height, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("grade", [0.04, -0.03])
+def test_beyond_the_ends_the_road_goes_on_at_its_grade(grade: float) -> None:
+    """A drive's first and last points lie beyond its path; the road there goes on at the grade
+    of its last metres (it used to stay flat: 0.4 m off 10 m out on a 4 % grade)."""
+    rng = np.random.default_rng(3)
+    heading = np.deg2rad(15.0)
+    trajectory = straight_trajectory(heading, length=5.0, step=0.5, grade=grade)
+    station = np.concatenate([rng.uniform(-40.0, -0.1, 200), rng.uniform(5.1, 45.0, 200)])
+    lateral, height = rng.uniform(-10.0, 10.0, 400), rng.uniform(0.0, 2.0, 400)
+    xyz = place((3.0, -2.0), heading, station, lateral, height, grade=grade)
+    track = track_coordinates(xyz, np.clip(station / SPEED, 0.0, 0.5), trajectory)
+    np.testing.assert_allclose(track.height, height, rtol=0, atol=1e-9)
+
+
+def test_a_vehicle_standing_still_has_the_road_its_pitch_gives() -> None:
+    """One frame of a spinning lidar without poses: the path is a line along the heading and the
+    road rises along it as the vehicle's nose does (a negative pitch), within 12 %."""
+    grade = 0.01
+    trajectory = Trajectory(
+        time=np.array([0.0, 0.1]),
+        position=np.array([[3.0, -2.0, ROAD_Z + 1.8]] * 2),
+        attitude=np.array([[0.0, -np.arctan(grade), 0.0]] * 2),
+    )
+    station = np.linspace(-60.0, 60.0, 121)
+    xyz = place((3.0, -2.0), 0.0, station, np.full(121, 4.0), np.full(121, 0.5), grade=grade)
+    track = track_coordinates(xyz, np.full(121, 0.05), trajectory)
+    np.testing.assert_allclose(track.station, station, atol=1e-9)
+    np.testing.assert_allclose(track.height, 0.5, atol=1e-9)
+    steep = Trajectory(trajectory.time, trajectory.position, np.array([[0.0, -0.5, 0.0]] * 2))
+    assert track_coordinates(xyz[-1:], np.array([0.05]), steep).height[0] == pytest.approx(
+        0.5 + 60 * (grade - 0.12)
+    )
 
 
 def circular_trajectory(radius: float, angle: float, step: float) -> tuple[Trajectory, np.ndarray]:

@@ -17,6 +17,11 @@ from guardrail_core.sensors.trajectory import Trajectory
 
 #: Trajectory samples closer than this to the previous one are the vehicle standing still.
 _MIN_STEP_M = 1e-6
+#: Beyond the path's ends the road goes on at the grade of its last metres: a line fitted to
+#: the road heights within this many metres of each end, its grade held within MAX_END_GRADE
+#: (a single frame's path spans a few metres, and a lidar sits a degree off level or so).
+END_FIT_M = 10.0
+MAX_END_GRADE = 0.12
 #: Newton steps divide by the bend factor ``1 - curvature * lateral``; a point near or beyond the
 #: centre of curvature (a factor near 0 or below) takes at most 5 times its tangential offset.
 _MIN_BEND = 0.2
@@ -30,7 +35,8 @@ class TrackCoordinates:
     ----------
     station : (N,) float64, metres along the trajectory's horizontal path from its first sample
     lateral : (N,) float64, metres to the left of the path (negative: right)
-    height : (N,) float64, metres above the road surface estimated from the trajectory
+    height : (N,) float64, metres above the road surface estimated from the trajectory (beyond
+        its ends, the road goes on at its end grades)
     """
 
     station: np.ndarray
@@ -50,6 +56,8 @@ def _path(
     Returns the arc length of every trajectory sample (M,), then arc length (K,), positions
     (K, 2), unit tangents (K, 2), signed curvature (K,) 1/m (positive turning left) and road
     heights (K,) of the samples where the vehicle moved, so that arc length strictly increases.
+    A vehicle that never moved gives a straight path along its heading, its road rising at the
+    grade its pitch gives (nose up, road up).
     """
     xy = trajectory.position[:, :2]
     step = np.linalg.norm(np.diff(xy, axis=0), axis=1)
@@ -62,7 +70,9 @@ def _path(
         direction = np.array([np.cos(yaw), np.sin(yaw)])
         path_xy = np.stack([xy[0], xy[0] + direction])
         tangent = np.stack([direction] * 2)
-        return sample_arc, np.array([0.0, 1.0]), path_xy, tangent, np.zeros(2), road[[0, 0]]
+        grade = float(np.clip(-np.tan(trajectory.attitude[0, 1]), -MAX_END_GRADE, MAX_END_GRADE))
+        road = road[[0, 0]] + np.array([0.0, grade])
+        return sample_arc, np.array([0.0, 1.0]), path_xy, tangent, np.zeros(2), road
     arc = sample_arc[keep]
     path_xy = xy[keep]
     tangent = np.gradient(path_xy, arc, axis=0)
@@ -103,6 +113,7 @@ def track_coordinates(
             f"{gps_time.shape}"
         )
     sample_arc, arc, path_xy, tangent, curvature, road = _path(trajectory)
+    grade_start, grade_end = end_grades(arc, road)
     station, lateral, height = _project(
         xyz[:, 0].copy(),
         xyz[:, 1].copy(),
@@ -115,10 +126,24 @@ def track_coordinates(
         tangent[:, 1].copy(),
         curvature,
         road,
+        grade_start,
+        grade_end,
         int(iterations),
         _MIN_BEND,
     )
     return TrackCoordinates(station=station, lateral=lateral, height=height)
+
+
+def end_grades(arc: np.ndarray, road: np.ndarray) -> tuple[float, float]:
+    """The road's grade (rise per metre along the path) at its start and its end: a line fitted
+    to the road heights (K,) within :data:`END_FIT_M` of each end of ``arc`` (K,), held within
+    :data:`MAX_END_GRADE`."""
+    grades = []
+    for near in (arc <= arc[0] + END_FIT_M, arc >= arc[-1] - END_FIT_M):
+        a, h = arc[near], road[near]
+        grade = np.polyfit(a - a.mean(), h, 1)[0] if len(a) >= 2 else 0.0
+        grades.append(float(np.clip(grade, -MAX_END_GRADE, MAX_END_GRADE)))
+    return grades[0], grades[1]
 
 
 # Compiled: each Newton step is a few dozen flops on values interpolated from the path, which
@@ -139,13 +164,15 @@ def _project(
     tangent_y: np.ndarray,
     curvature: np.ndarray,
     road: np.ndarray,
+    grade_start: float,
+    grade_end: float,
     iterations: int,
     min_bend: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
     """Newton steps of every point's foot on the path sampled at ``arc`` (K,), from the starting
     ``station`` (N,); returns (N,) station, lateral and height. Beyond the path's ends the path
-    continues straight along its end tangents; values between samples are linear in arc
-    length."""
+    continues straight along its end tangents and the road at its end grades; values between
+    samples are linear in arc length."""
     n, k = len(x), len(arc)
     station = station.copy()
     lateral = np.empty(n)
@@ -177,7 +204,8 @@ def _project(
             dy = y[i] - (path_y[j] + w * (path_y[j + 1] - path_y[j]) + beyond * ty)
             if step == iterations:
                 lateral[i] = tx * dy - ty * dx
-                height[i] = z[i] - (road[j] + w * (road[j + 1] - road[j]))
+                grade = grade_end if beyond > 0 else grade_start
+                height[i] = z[i] - (road[j] + w * (road[j + 1] - road[j]) + beyond * grade)
             else:
                 # Newton step: on a curve the foot point moves 1 / (1 - curvature * lateral)
                 # times as fast as the point's tangential offset.
