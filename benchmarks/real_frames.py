@@ -6,8 +6,9 @@ Usage::
         [--json]
 
 For every real frame of ``../shared/realdata`` labelled in ``tests/data/real_frames/`` (how:
-``benchmarks/label_real_frames.py``), the frame is imported (``guardrail import kitti``) and
-processed with each model, and reported:
+``benchmarks/label_real_frames.py``), the frame is imported (``guardrail import kitti``, or
+``--importer lidar``: ``guardrail import lidar`` on the frame alone, as any spinning lidar's)
+and processed with each model, and reported:
 
 - per labelled barrier, the metres of rail the scan sees and the metres found (1 m bins along
   the rail; a bin is found when at least half of its rail points are called guardrail:
@@ -48,6 +49,7 @@ from guardrail_core.extract.model_folder import DEFAULT_MODEL_DIR, load_model  #
 from guardrail_core.formats.drive import load_drive  # noqa: E402
 from guardrail_core.formats.run_folder import load_run  # noqa: E402
 from guardrail_core.importers.kitti import import_kitti  # noqa: E402
+from guardrail_core.importers.lidar import import_lidar  # noqa: E402
 from guardrail_core.process import process_drive  # noqa: E402
 
 SEQUENCES = ROOT.parent / "shared" / "realdata" / "kitti-odometry" / "sequences"
@@ -77,11 +79,27 @@ def found_points(drive_dir: Path, run_dir: Path) -> tuple[np.ndarray, np.ndarray
     return drive.points.xyz, found
 
 
-def measure_frame(name: str, model, settings: list[str], work: Path) -> dict:
+def in_file_order(xyz: np.ndarray, scan: Path) -> np.ndarray:
+    """(N,) the drive point of every point of the ``.bin`` ``scan`` (a drive imported from it
+    alone, in the sensor's frame, its points in another order)."""
+    from scipy.spatial import cKDTree
+
+    original = np.fromfile(scan, dtype="<f4").reshape(-1, 4)[:, :3]
+    distance, index = cKDTree(xyz).query(original)
+    if len(xyz) != len(original) or distance.max() > 1e-3:
+        raise SystemExit(f"{scan}: the imported points are not the file's")
+    return index
+
+
+def measure_frame(name: str, model, settings: list[str], work: Path, importer: str) -> dict:
     sequence, frame, labels_file = FRAMES[name]
     source = SEQUENCES / sequence
-    labels = load_frame_labels(LABELS / labels_file, source / "velodyne" / f"{frame:06d}.bin")
-    import_kitti(source, work / "drive", frames=[frame])
+    scan = source / "velodyne" / f"{frame:06d}.bin"
+    labels = load_frame_labels(LABELS / labels_file, scan)
+    if importer == "kitti":
+        import_kitti(source, work / "drive", frames=[frame])
+    else:  # the frame alone, as any spinning lidar's: no poses, no calibration
+        import_lidar([scan], work / "drive")
     extraction, reconstruction = process_params(settings)
     process_drive(
         load_drive(work / "drive"),
@@ -91,6 +109,9 @@ def measure_frame(name: str, model, settings: list[str], work: Path) -> dict:
         reconstruction=reconstruction,
     )
     xyz, found = found_points(work / "drive", work / "run")
+    if importer == "lidar":
+        order = in_file_order(xyz, scan)
+        xyz, found = xyz[order], found[order]
     if len(xyz) != len(labels):
         raise SystemExit(f"{name}: {len(xyz)} points imported for {len(labels)} labelled")
     barriers = rail_metres(xyz[:, :2], labels, found)
@@ -112,22 +133,28 @@ def measure_frame(name: str, model, settings: list[str], work: Path) -> dict:
     }
 
 
-def measure(model_dir: Path, settings: list[str]) -> dict:
+def measure(model_dir: Path, settings: list[str], importer: str = "kitti") -> dict:
     model = load_model(model_dir)
     frames = {}
     with tempfile.TemporaryDirectory() as tmp:
         for i, name in enumerate(FRAMES):
-            frames[name] = measure_frame(name, model, settings, Path(tmp) / str(i))
+            frames[name] = measure_frame(name, model, settings, Path(tmp) / str(i), importer)
     holds = all(
         f["found_share"] is None
         or (f["found_share"] >= GOAL_FOUND and f["off_guardrail_share"] <= GOAL_OFF)
         for f in frames.values()
     )
-    return {"model": str(model_dir), "settings": settings, "frames": frames, "holds": holds}
+    return {
+        "model": str(model_dir),
+        "importer": importer,
+        "settings": settings,
+        "frames": frames,
+        "holds": holds,
+    }
 
 
 def print_table(result: dict) -> None:
-    print(f"model: {result['model']}")
+    print(f"model: {result['model']}, imported by `guardrail import {result['importer']}`")
     for name, frame in result["frames"].items():
         share, called = frame["found_share"], frame["guardrail_points"]
         if share is None:
@@ -159,11 +186,23 @@ def main(argv: list[str] | None = None) -> int:
         metavar="STAGE.NAME=VALUE",
         help="a parameter as `guardrail process --set` takes it (repeatable)",
     )
+    parser.add_argument(
+        "--importer",
+        choices=("kitti", "lidar", "both"),
+        default="kitti",
+        help="import the frames with `guardrail import kitti` (the sequence's poses and "
+        "calibration), `guardrail import lidar` (the frame alone, as any spinning lidar's), or both",
+    )
     parser.add_argument("--json", action="store_true", help="print the figures as JSON")
     args = parser.parse_args(argv)
     if not (SEQUENCES / "01" / "calib.txt").is_file():
         parser.error(f"the real KITTI data is not at {SEQUENCES}")
-    results = [measure(model, args.set) for model in args.model or [DEFAULT_MODEL_DIR]]
+    importers = ["kitti", "lidar"] if args.importer == "both" else [args.importer]
+    results = [
+        measure(model, args.set, importer)
+        for model in args.model or [DEFAULT_MODEL_DIR]
+        for importer in importers
+    ]
     if args.json:
         print(json.dumps(results, indent=2))
         return 0
