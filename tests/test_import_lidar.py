@@ -29,8 +29,8 @@ from guardrail_core.formats.drive import load_drive
 from guardrail_core.formats.run_folder import load_run
 from guardrail_core.geom.frames import invert_transform
 from guardrail_core.importers.lidar import (
-    estimate_road_grade,
     estimate_sensor_height,
+    fit_road,
     import_lidar,
 )
 from guardrail_core.importers.lidar_frames import read_lidar_frame
@@ -175,10 +175,10 @@ def test_the_sensor_height_is_measured_from_the_road_under_it() -> None:
     # A sensor pitched 0.6 degree nose down sees the road rise 1 % ahead; a wall changes nothing.
     tilted = road.copy()
     tilted[:, 2] += 0.01 * tilted[:, 0]
-    assert estimate_road_grade(np.concatenate([tilted, wall]), 1.95) == pytest.approx(
-        0.01, abs=5e-4
-    )
-    assert estimate_road_grade(wall, 1.95) == 0.0
+    # The layer guessed 3 cm high: the plane still finds the road 1.95 m under the sensor.
+    grade, height = fit_road(np.concatenate([tilted, wall]), 1.92)
+    assert grade == pytest.approx(0.01, abs=5e-4) and height == pytest.approx(1.95, abs=2e-3)
+    assert fit_road(wall, 1.95) == (0.0, 1.95)
 
 
 def _write(path: Path, text: str | bytes) -> Path:
