@@ -127,26 +127,35 @@ def estimate_sensor_height(xyz: np.ndarray) -> float:
 
 
 def fit_road(xyz: np.ndarray, height_m: float) -> tuple[float, float]:
-    """The road around the sensor: its rise per metre along the sensor's x axis (forward) and
-    its depth under the sensor (metres), from a plane fitted to the road's returns (within
-    :data:`GROUND_RANGE_M` and 4 m to each side, 0.25 m of ``height_m`` below the sensor,
-    refitted on those within 5 cm). Where too few are found: no grade and ``height_m``.
+    """The road around the sensor: its rise per metre along the sensor's x axis (forward), from
+    a plane fitted to the road's returns (within :data:`GROUND_RANGE_M` and 4 m to each side,
+    0.25 m of ``height_m`` below the sensor, refitted on those within 5 cm), and its depth under
+    the sensor (metres): the median of the returns 3-10 m away and within 2 m to each side, the
+    grade taken off (the road's crown bends a plane across the carriageway). Where too few are
+    found: no grade and ``height_m``.
 
     A lidar sits a degree or so off level, which puts the road 0.35 m off at 20 m, and the
     densest layer of returns (:func:`estimate_sensor_height`) then lies a few centimetres off
-    the road under the sensor (KITTI frame 280: 1.69 m, the plane 1.76 m, the car's 1.73 m).
+    the road under the sensor (KITTI frame 280: the layer 1.69 m, this 1.75 m).
     """
     x, y, z = xyz.T
     reach = np.hypot(x, y)
+    level = np.abs(z + height_m) < 0.25
     near = (reach >= GROUND_RANGE_M[0]) & (reach <= GROUND_RANGE_M[1]) & (np.abs(y) < 4.0)
-    near &= np.abs(z + height_m) < 0.25
+    near &= level
     for _ in range(3):
         if near.sum() < 50 or np.ptp(x[near]) < 5.0:
             return 0.0, height_m
         design = np.c_[x[near], y[near], np.ones(int(near.sum()))]
         coef = np.linalg.lstsq(design, z[near], rcond=None)[0]
         near &= np.abs(z - (coef[0] * x + coef[1] * y + coef[2])) < 0.05
-    return float(coef[0]), float(-coef[2])
+    grade = float(coef[0])
+    under = level & (reach >= GROUND_RANGE_M[0]) & (reach <= 10.0) & (np.abs(y) < 2.0)
+    depth = z[under] - grade * x[under]
+    if len(depth) < 20:
+        return grade, height_m
+    depth = depth[np.abs(depth - np.median(depth)) < 0.05]
+    return grade, float(-np.median(depth))
 
 
 def _rings(frame: LidarFrame, table: np.ndarray | None) -> tuple[np.ndarray, int, str]:
