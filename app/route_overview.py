@@ -23,7 +23,7 @@ from guardrail_core.formats.drive_tiles import vehicle_station
 from guardrail_core.reconstruct.inventory import inventory_rows
 from guardrail_core.reconstruct.model import RunModel
 from guardrail_core.reconstruct.model_json import run_model_from_json
-from guardrail_core.review.queue import segment_queue_scores
+from guardrail_core.review.queue import asked_segments, segment_queue_scores
 from guardrail_core.sensors.trajectory import Trajectory
 
 #: Metres (horizontal): how far from its run's pole line a segment's centroid may lie.
@@ -33,7 +33,9 @@ LINE_STEP_M = 0.25
 #: The most trajectory vertices sent (the map needs no more).
 TRAJECTORY_VERTICES = 2000
 
-UNREVIEWED, REVIEWED, CHANGED = "unreviewed", "reviewed", "changed"
+#: A run's review state: nobody has labelled any of it; some of it is labelled and the queue
+#: still asks about some; the queue asks nothing more about it.
+UNREVIEWED, STARTED, DONE = "unreviewed", "started", "done"
 
 
 @dataclass(frozen=True)
@@ -146,11 +148,13 @@ def route_overview(session: ReviewSession) -> dict:
     reviewed = session.operator_label >= 0
     changed = reviewed & ((session.operator_label == 1) != seg["label"])
     score = segment_queue_scores(seg)
+    asked = asked_segments(seg, reviewed)
     runs = []
     for k, place in enumerate(places):
         mine = np.flatnonzero(owner == k)
         n_reviewed = int(reviewed[mine].sum())
         n_changed = int(changed[mine].sum())
+        n_asked = int(asked[mine].sum())
         todo = mine[~reviewed[mine]]
         # Where "fly to" goes: the run's most doubtful unreviewed segment, else its first.
         target = todo[np.argmax(score[todo])] if len(todo) else (mine[0] if len(mine) else None)
@@ -168,7 +172,11 @@ def route_overview(session: ReviewSession) -> dict:
                 "segments": len(mine),
                 "reviewed": n_reviewed,
                 "changed": n_changed,
-                "state": CHANGED if n_changed else REVIEWED if n_reviewed else UNREVIEWED,
+                "asked": n_asked,
+                # Of what the queue asks or asked about, the share labelled: one label on a
+                # run of forty doubtful segments is 1/40, not "reviewed".
+                "progress": round(n_reviewed / (n_reviewed + n_asked), 4) if n_asked else 1.0,
+                "state": DONE if not n_asked else STARTED if n_reviewed else UNREVIEWED,
                 "segment": None if target is None else int(target),
             }
         )
@@ -182,4 +190,6 @@ def route_overview(session: ReviewSession) -> dict:
         "length_m": round(float(length[0]), 1),
         "runs": runs,
         "segments_off_runs": int((counted & (owner < 0)).sum()),
+        "asked": int(asked.sum()),
+        "reviewed": int(reviewed.sum()),
     }

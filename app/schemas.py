@@ -273,7 +273,15 @@ class RouteRun(ResponseModel):
     )
     reviewed: int = Field(description="of them, those an operator labelled")
     changed: int = Field(description="of the reviewed, those whose label the operator changed")
-    state: Literal["unreviewed", "reviewed", "changed"]
+    asked: int = Field(description="of them, those the review queue still asks about")
+    progress: float = Field(
+        description="reviewed / (reviewed + asked): the share of what the queue asks or asked "
+        "about that is labelled (1 when it asks nothing)"
+    )
+    state: Literal["unreviewed", "started", "done"] = Field(
+        description="'done': the queue asks nothing more about it; 'started': some of it is "
+        "labelled; 'unreviewed': none"
+    )
     segment: int | None = Field(
         description="the segment to fly to: its most doubtful unreviewed one, else its first"
     )
@@ -289,6 +297,8 @@ class RouteOverview(ResponseModel):
         description="segments the model or an operator calls guardrail, or reviewed, that lie "
         "on no reconstructed run (runs without poles, rails beyond their end poles, mistakes)"
     )
+    asked: int = Field(description="segments the review queue asks about, in the whole drive")
+    reviewed: int = Field(description="segments an operator labelled, in the whole drive")
 
 
 class SegmentPage(ResponseModel):
@@ -322,7 +332,8 @@ class QueueItem(Segment):
     reason: Literal["disagrees", "unchecked", "uncertain"] = Field(
         description="'disagrees': the correction changed the model's label; 'unchecked': the "
         "segment stands for a guardrail run (5 or more guardrail segments of a wireframe "
-        "component) no operator has looked at yet"
+        "piece) no operator has looked at yet; 'uncertain': the model's P(guardrail) lies "
+        "between 5 % and 95 %"
     )
     score: float = Field(
         description="the change a decision is expected to make: uncertainty (1 at p = 0.5) "
@@ -332,7 +343,16 @@ class QueueItem(Segment):
 
 
 class Queue(ResponseModel):
-    items: list[QueueItem]
+    """What the review queue asks, and how far the review is (in the whole drive, or in one
+    guardrail run with ``?run=``)."""
+
+    items: list[QueueItem] = Field(description="the first ``limit`` segments to ask about")
+    asked: int = Field(
+        description="segments the queue asks about: unreviewed, 10 points or more, and "
+        "disagreeing, unchecked, or with P(guardrail) between 5 % and 95 %"
+    )
+    reviewed: int = Field(description="segments an operator has labelled")
+    done: bool = Field(description="nothing is left to ask: the review is done")
 
 
 class Selection(ResponseModel):

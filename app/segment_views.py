@@ -11,9 +11,8 @@ from app.route_overview import run_places, segment_runs
 from app.session import ReviewSession
 from guardrail_core.formats.run_folder import CROP_OK, CROP_STATUS_NAMES
 from guardrail_core.review.queue import (
-    MIN_QUEUE_POINTS,
+    asked_segments,
     queue_order,
-    queue_scores,
     segment_queue_scores,
     uncertainty,
     unchecked_runs,
@@ -91,25 +90,21 @@ def filter_segments(
     return ids.astype(np.int64)
 
 
-#: A run's segments worth a look in "review this run": uncertainty 0.1 and above (probability
-#: within 0.05 of 0 or 1 is left out), or a label the correction changed.
-RUN_DOUBT_SCORE = 0.1
+def review_queue(session: ReviewSession, limit: int, run: int | None = None) -> dict[str, Any]:
+    """The segments the review queue asks about, best first, and how far the review is.
 
+    The queue asks about an unreviewed segment of ``MIN_QUEUE_POINTS`` points or more whose
+    raw prediction and corrected label disagree (§3.3's correction changed it), that stands for
+    a guardrail run no operator has looked at yet, or whose P(guardrail) lies between 5 % and
+    95 % (:func:`guardrail_core.review.queue.asked_segments`); nothing else. Those that disagree
+    or stand for a run come first; then the change a decision is expected to make orders them:
+    the model's uncertainty (1 at p = 0.5), weighted by the points it moves and by half again
+    where it would join or split a guardrail run
+    (:func:`guardrail_core.review.queue.segment_queue_scores`). With ``run``, those of that
+    guardrail run in order along the road, as they were scanned.
 
-def review_queue(
-    session: ReviewSession, limit: int, run: int | None = None
-) -> list[dict[str, Any]]:
-    """Unreviewed segments most worth an operator's look, best first.
-
-    A segment whose raw prediction and corrected label disagree (§3.3's correction changed it),
-    and one segment of every guardrail run no operator has looked at yet
-    (:func:`guardrail_core.review.queue.unchecked_runs`), come first; then the change a
-    decision is expected to make orders them: the model's uncertainty (1 at p = 0.5), weighted
-    by the points it moves and by half again where it would join or split a guardrail run
-    (:func:`guardrail_core.review.queue.segment_queue_scores`).
-    Segments of fewer than ``MIN_QUEUE_POINTS`` points are left out. With ``run``, the doubtful
-    unreviewed segments of that guardrail run (:data:`RUN_DOUBT_SCORE` and above) in order
-    along the road, as they were scanned.
+    Returns ``items`` (the first ``limit``), ``asked`` (how many the queue holds), ``reviewed``
+    (segments an operator labelled, in the same scope) and ``done`` (nothing left to ask).
 
     Raises
     ------
@@ -122,23 +117,28 @@ def review_queue(
     score = segment_queue_scores(seg)  # the change a decision is expected to make
     unchecked = unchecked_runs(seg["component"], seg["label"], seg["n_points"], reviewed, score)
     score = score + unchecked  # as segment_queue_scores(seg, reviewed)
+    asked = asked_segments(seg, reviewed)
     if run is None:
-        order = queue_order(score, reviewed, n_points=seg["n_points"])[:limit]
+        order = queue_order(np.where(asked, score, -np.inf), ~asked)
+        in_scope = np.ones(len(asked), bool)
     else:
         places = run_places(session)
         found = [k for k, place in enumerate(places) if place.row["run_id"] == run]
         if not found:
             raise KeyError(f"no guardrail run {run} with poles")
-        on_run = segment_runs(session, places) == found[0]
-        doubt = queue_scores(seg["probability"], seg["raw_label"], seg["label"])
-        big = seg["n_points"] >= MIN_QUEUE_POINTS
-        doubtful = np.flatnonzero(on_run & ~reviewed & big & (doubt >= RUN_DOUBT_SCORE))
-        scanned = seg["time"][doubtful].mean(axis=1)
-        order = doubtful[np.argsort(scanned, kind="stable")][:limit].astype(np.int64)
-    rows = segment_rows(session, order)
-    for row, s in zip(rows, order, strict=True):
+        in_scope = segment_runs(session, places) == found[0]
+        mine = np.flatnonzero(in_scope & asked)
+        scanned = seg["time"][mine].mean(axis=1)
+        order = mine[np.argsort(scanned, kind="stable")].astype(np.int64)
+    rows = segment_rows(session, order[:limit])
+    for row, s in zip(rows, order, strict=False):
         row["reason"] = (
             "disagrees" if disagrees[s] else "unchecked" if unchecked[s] else "uncertain"
         )
         row["score"] = round(float(score[s]), 4)
-    return rows
+    return {
+        "items": rows,
+        "asked": len(order),
+        "reviewed": int((reviewed & in_scope).sum()),
+        "done": len(order) == 0,
+    }

@@ -227,6 +227,15 @@ class ReviewSession:
         self.notify("selection", ids)
         return ids
 
+    def cancel_lasso(self) -> np.ndarray:
+        """Let go of a lasso: the points one took (its segments stay selected), and one being
+        drawn in the 3D view (the scene ends it on the event). Returns the selection."""
+        with self.lock:
+            self.lasso = np.zeros(0, np.int64)
+            ids = self.selection
+        self.notify("lasso_cancelled", ids)
+        return ids
+
     def relabel_lasso(self, label: str, *, who: str | None = None) -> Relabel:
         """Give the lasso's points (not their whole segments) the operator label ``label``.
 

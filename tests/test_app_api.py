@@ -18,7 +18,12 @@ from guardrail_core.errors import InvalidOptionError
 from guardrail_core.extract.crops import CropParams, crop_window, cut_crop
 from guardrail_core.formats.drive import Drive
 from guardrail_core.formats.run_folder import load_run
-from guardrail_core.review.queue import MIN_QUEUE_POINTS, segment_queue_scores, unchecked_runs
+from guardrail_core.review.queue import (
+    MIN_QUEUE_POINTS,
+    asked_segments,
+    segment_queue_scores,
+    unchecked_runs,
+)
 from tests.app_fixtures import api_client, copy_run, new_session
 
 
@@ -143,16 +148,26 @@ def test_labels_survive_a_restart(
 def test_queue_puts_disagreement_unchecked_runs_and_uncertainty_first(
     client: TestClient, session: ReviewSession
 ):
-    items = client.get("/api/queue", params={"limit": 50}).json()["items"]
+    seg = session.run.segments
+    # The test model is sure of most segments: make every fifth one doubtful (P 5-95 %).
+    seg["probability"][::5] = np.linspace(0.06, 0.94, len(seg["probability"][::5]))
+    queue = client.get("/api/queue", params={"limit": 50}).json()
+    items = queue["items"]
     scores = [row["score"] for row in items]
     assert scores == sorted(scores, reverse=True)
-    seg = session.run.segments
     big = seg["n_points"] >= MIN_QUEUE_POINTS
     assert all(row["n_points"] >= MIN_QUEUE_POINTS for row in items)  # too small to judge
     assert (~big).any(), "the test street has tiny segments to leave out"
     nobody = np.zeros(len(seg["label"]), bool)
+    asked = asked_segments(seg, nobody)
+    assert queue["asked"] == int(asked.sum()) > 50 and queue["reviewed"] == 0
+    assert not queue["done"]
+    assert all(asked[row["id"]] for row in items)
     expected = segment_queue_scores(seg, nobody)
     assert scores == [round(float(expected[row["id"]]), 4) for row in items]
+    # Nothing asked scores more than the last one shown.
+    assert expected[asked].max() == pytest.approx(scores[0], abs=1e-4)
+    assert np.sort(expected[asked])[::-1][49] == pytest.approx(scores[-1], abs=1e-4)
     disagree = (seg["raw_label"] != seg["label"]) & big
     unchecked = unchecked_runs(
         seg["component"], seg["label"], seg["n_points"], nobody, segment_queue_scores(seg)
@@ -178,6 +193,32 @@ def test_queue_puts_disagreement_unchecked_runs_and_uncertainty_first(
     first_id = ids[0]
     client.put(f"/api/segments/{first_id}/label", json={"label": "other"})
     assert first_id not in [row["id"] for row in client.get("/api/queue").json()["items"]]
+
+
+def test_the_queue_has_an_end(client: TestClient, session: ReviewSession) -> None:
+    """Only what the model is unsure of (or the correction changed, or stands for a run nobody
+    has looked at) is asked; once that is labelled, the review is done."""
+    seg = session.run.segments
+    sure = np.abs(seg["probability"] - 0.5) > 0.45
+    agrees = seg["raw_label"] == seg["label"]
+    queue = client.get("/api/queue", params={"limit": 500}).json()
+    asked = queue["asked"]
+    assert 0 < asked < len(seg["label"]) / 2
+    for row in queue["items"]:
+        if row["reason"] == "uncertain":
+            assert not sure[row["id"]]
+    assert (sure & agrees & (seg["n_points"] >= MIN_QUEUE_POINTS)).sum() > asked
+    labelled = 0
+    while not (queue := client.get("/api/queue", params={"limit": 500}).json())["done"]:
+        ids = [row["id"] for row in queue["items"]]
+        client.post("/api/labels/batch", json={"segments": ids, "label": "guardrail"})
+        labelled += len(ids)
+        assert labelled <= asked  # labelling asks nothing new
+    assert queue["items"] == [] and queue["asked"] == 0
+    assert queue["reviewed"] == labelled
+    overview = client.get("/api/overview").json()
+    assert overview["asked"] == 0 and overview["reviewed"] == labelled
+    assert all(run["state"] == "done" and run["progress"] == 1.0 for run in overview["runs"])
 
 
 def test_selection_round_trip(client: TestClient, session: ReviewSession) -> None:

@@ -14,11 +14,10 @@ from fastapi.testclient import TestClient
 
 from app.main import create_app
 from app.route_overview import RUN_REACH_M, run_places, segment_runs
-from app.segment_views import RUN_DOUBT_SCORE
 from app.session import ReviewSession
 from guardrail_core.formats.drive import Drive
 from guardrail_core.formats.drive_tiles import vehicle_station
-from guardrail_core.review.queue import MIN_QUEUE_POINTS, queue_scores
+from guardrail_core.review.queue import asked_segments
 from tests.app_fixtures import copy_run, new_session
 
 
@@ -58,7 +57,9 @@ def test_the_overview_lists_every_run_with_poles_in_order_along_the_drive(
         poles = np.array([p["position"][:2] for p in with_poles[run["run_id"]]["poles"]])
         np.testing.assert_allclose(run["path"], poles, atol=0.006)  # rounded to the cm
         assert run["poles"] == len(poles)
-        assert run["state"] == "unreviewed" and run["reviewed"] == run["changed"] == 0
+        assert run["reviewed"] == run["changed"] == 0
+        assert run["state"] == ("unreviewed" if run["asked"] else "done")
+        assert run["progress"] == (0.0 if run["asked"] else 1.0)
         assert run["segments"] > 0 and run["segment"] is not None
     trajectory = np.array(overview["trajectory"])
     assert len(trajectory) <= 2001
@@ -93,13 +94,19 @@ def test_the_review_state_follows_the_labels(client: TestClient) -> None:
     other = client.get(f"/api/segments/{second['segment']}").json()["model_label"]
     flipped = "other" if other == "guardrail" else "guardrail"
     client.put(f"/api/segments/{second['segment']}/label", json={"label": flipped})
-    after = {r["run_id"]: r for r in client.get("/api/overview").json()["runs"]}
-    assert after[first["run_id"]]["state"] == "reviewed"
+    overview = client.get("/api/overview").json()
+    after = {r["run_id"]: r for r in overview["runs"]}
     assert after[first["run_id"]]["reviewed"] == 1 and after[first["run_id"]]["changed"] == 0
     assert after[first["run_id"]]["segment"] != first["segment"]  # the next doubtful one
-    assert after[second["run_id"]]["state"] == "changed"
     assert after[second["run_id"]]["segments"] == second["segments"]  # reviewed still counts
     assert after[second["run_id"]]["changed"] == 1
+    # One label is not a reviewed run: the share of what the queue asks that is labelled.
+    for run in (after[first["run_id"]], after[second["run_id"]]):
+        assert run["progress"] == pytest.approx(1 / (1 + run["asked"]), abs=1e-4)
+        assert run["state"] == ("started" if run["asked"] else "done")
+    assert any(run["state"] == "started" for run in after.values()), "runs with doubt left"
+    assert overview["reviewed"] == 2
+    assert overview["asked"] == client.get("/api/queue?limit=1").json()["asked"]
     client.post("/api/labels/undo")
     client.post("/api/labels/undo")
     again = {r["run_id"]: r for r in client.get("/api/overview").json()["runs"]}
@@ -132,23 +139,29 @@ def test_review_this_run_steps_through_its_doubtful_segments_along_the_road(
     # The test model is sure of most segments: make every third segment on a run a coin toss.
     on_runs = np.flatnonzero(owner >= 0)
     seg["probability"][on_runs[::3]] = 0.5
-    score = queue_scores(seg["probability"], seg["raw_label"], seg["label"])
     walked = 0
     for k, place in enumerate(places):
         run_id = place.row["run_id"]
-        items = client.get(f"/api/queue?run={run_id}&limit=500").json()["items"]
+        queue = client.get(f"/api/queue?run={run_id}&limit=500").json()
+        items = queue["items"]
         ids = np.array([item["id"] for item in items], np.int64)
-        big = seg["n_points"] >= MIN_QUEUE_POINTS  # too small to judge: left out
-        expected = np.flatnonzero((owner == k) & (score >= RUN_DOUBT_SCORE) & big)
-        assert sorted(ids.tolist()) == expected.tolist()  # nothing reviewed yet
+        reviewed = session.operator_label >= 0
+        expected = np.flatnonzero((owner == k) & asked_segments(seg, reviewed))
+        assert sorted(ids.tolist()) == expected.tolist()
+        assert queue["asked"] == len(ids) and queue["done"] == (len(ids) == 0)
+        assert queue["reviewed"] == int(reviewed[owner == k].sum())
         scanned = seg["time"][ids].mean(axis=1)
         assert (np.diff(scanned) >= 0).all()  # along the road, as scanned
         assert all(not item["reviewed"] for item in items)
         walked += len(ids)
         if len(ids):  # a labelled segment leaves the run's queue
             client.put(f"/api/segments/{int(ids[0])}/label", json={"label": "guardrail"})
-            again = client.get(f"/api/queue?run={run_id}&limit=500").json()["items"]
-            assert [item["id"] for item in again] == ids[1:].tolist()
+            again = client.get(f"/api/queue?run={run_id}&limit=500").json()
+            reviewed = session.operator_label >= 0
+            left = (owner == k) & asked_segments(seg, reviewed)
+            assert [item["id"] for item in again["items"]] == [s for s in ids if left[s]]
+            assert int(ids[0]) not in [item["id"] for item in again["items"]]
+            assert again["reviewed"] == queue["reviewed"] + 1
     assert walked > 0, "the test street's runs have doubtful segments"
     unknown = max(place.row["run_id"] for place in places) + 1
     assert client.get(f"/api/queue?run={unknown}").status_code == 404

@@ -9,7 +9,9 @@ import numpy as np
 import pytest
 import viser
 import viser.transforms as vtf
+from fastapi.testclient import TestClient
 
+from app.main import create_app
 from app.route_overview import run_places
 from app.scene.colours import GUARDRAIL, OTHER, SELECTED, point_colours, probability_colours
 from app.scene.picking import in_polygon, in_rectangle, pick_along_ray, project_to_screen
@@ -304,6 +306,36 @@ def test_a_lasso_selects_the_points_inside_it_and_the_page_labels_only_those(
     assert len(session.lasso) == 0
     with pytest.raises(InvalidOptionError, match="no lasso"):
         session.relabel_lasso("other")
+
+
+def test_the_page_cancels_a_lasso_being_drawn_and_one_taken(
+    scene: ReviewScene, session: ReviewSession
+) -> None:
+    """A reload of the page, or Escape there, cancels a lasso: one being drawn stops taking
+    clicks as corners (before, the next clicks after a reload silently became corners), and
+    the points one took are let go while their segments stay selected."""
+    camera = SimpleNamespace(
+        wxyz=(1.0, 0.0, 0.0, 0.0), position=(0.0, 0.0, 0.0), fov=1.0, aspect=1.5
+    )
+    client = SimpleNamespace(camera=camera)
+    scene.start_lasso()
+    for corner in ((0.3, 0.3), (0.6, 0.3)):
+        scene.add_lasso_corner(_click(client, corner))  # type: ignore[arg-type]
+    assert scene._lasso is not None and scene._lasso_line is not None
+    with TestClient(create_app(session)) as api:
+        assert api.post("/api/lasso/cancel", json={}).json()["lasso_points"] == 0
+    assert scene._lasso is None and scene._lasso_line is None
+    assert scene._lasso_start.visible and not scene._lasso_close.visible
+    segment = int(np.flatnonzero(session.run.segments["n_points"] > 20)[0])
+    points = session.tiles.points_of(np.array([segment]))[:5]
+    session.select_points(points)
+    assert len(session.lasso) == 5
+    with TestClient(create_app(session)) as api:
+        assert api.post("/api/lasso/cancel", json={}).json() == {
+            "segments": [segment],
+            "lasso_points": 0,
+        }
+    assert len(session.lasso) == 0 and session.selection.tolist() == [segment]
 
 
 def test_only_the_meshes_of_runs_near_the_window_are_sent(session: ReviewSession) -> None:

@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from guardrail_core.review.queue import (
+    asked_segments,
     odd_one_out,
     points_weight,
     queue_order,
@@ -118,3 +119,25 @@ def test_every_guardrail_run_nobody_looked_at_gets_one_segment_in_front() -> Non
     ]
     assert not unchecked_runs(component, label, n_points, reviewed, base, min_segments=6)[2]
     assert unchecked_runs(component, label, n_points, reviewed, base, min_segments=4)[11]
+
+
+def test_the_queue_asks_only_what_it_doubts_and_ends() -> None:
+    """Asked: P between 5 % and 95 %, a label the correction changed, or a run nobody looked at;
+    never a reviewed or tiny segment; nothing left once those are labelled."""
+    #            rail (0): 6 slices, P 0.99 | doubtful (1): P 0.04, 0.06, 0.5, 0.94, 0.96, NaN
+    component = np.repeat([0, 1], 6)
+    slice_index = np.concatenate([np.arange(6), np.arange(6) * 3])
+    probability = np.array([0.99] * 6 + [0.04, 0.06, 0.5, 0.94, 0.96, np.nan])
+    label = probability >= 0.5
+    n_points = np.full(12, 50)
+    table = _segments_table(probability, label, n_points, component, slice_index)
+    table["raw_label"] = label.copy()
+    table["raw_label"][6] = True  # the correction changed it: asked however sure
+    reviewed = np.zeros(12, bool)
+    asked = asked_segments(table, reviewed)
+    # The rail's first slice stands for it (unchecked); 0.04 and 0.96 lie outside the band.
+    assert np.flatnonzero(asked).tolist() == [0, 6, 7, 8, 9, 11]
+    n_points[7] = 9  # too small to judge
+    assert np.flatnonzero(asked_segments(table, reviewed)).tolist() == [0, 6, 8, 9, 11]
+    reviewed[[0, 6, 8, 9, 11]] = True  # one look at the rail checks it all
+    assert not asked_segments(table, reviewed).any()

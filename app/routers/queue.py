@@ -34,10 +34,11 @@ def get_queue(
         ),
     ] = None,
 ) -> dict[str, Any]:
-    """Unreviewed segments, most worth a look first (disagreement, then uncertainty); with
-    ``run``, that guardrail run's doubtful ones in order along the road."""
+    """The segments the queue asks about, most worth a look first (disagreement, then
+    uncertainty), and how far the review is; with ``run``, that guardrail run's in order along
+    the road."""
     try:
-        return {"items": review_queue(session, limit, run)}
+        return review_queue(session, limit, run)
     except KeyError as exc:
         raise HTTPException(404, detail=str(exc.args[0])) from exc
 
@@ -62,4 +63,13 @@ def put_selection(session: Session, body: SelectionBody) -> dict[str, Any]:
         session.select(body.segments)
     except KeyError as exc:
         raise HTTPException(404, detail=str(exc.args[0])) from exc
+    return _selection(session)
+
+
+@router.post("/lasso/cancel", response_model=Selection)
+def cancel_lasso(session: Session) -> dict[str, Any]:
+    """Cancel a lasso: one being drawn in the 3D view stops taking clicks as corners, and the
+    points one took are let go (their segments stay selected). The page sends it when it
+    loads and on Escape."""
+    session.cancel_lasso()
     return _selection(session)

@@ -418,8 +418,11 @@ class ReviewScene:
         if event == "reconstruction":
             self.load_meshes()
             return
+        if event == "lasso_cancelled":  # the page was reloaded, or Escape pressed there
+            with self._lock:
+                self._end_lasso()
         self.recolour()
-        if event in ("selection", "labels", "predictions"):
+        if event in ("selection", "labels", "predictions", "lasso_cancelled"):
             self._show_selection()
         if event == "selection" and len(segments) and self._fly_on_select:
             self.fly_to(int(segments[0]))

@@ -25,6 +25,11 @@ MIN_QUEUE_POINTS = 10
 FULL_WEIGHT_POINTS = 200
 #: How much more a decision counts when it joins two guardrail stretches or removes a lone one.
 RUN_CHANGE_WEIGHT = 0.5
+#: The queue asks about a segment only when the model's :func:`uncertainty` is at least this
+#: (P(guardrail) between 5 % and 95 %), unless the correction changed its label or it stands
+#: for a run nobody has looked at: below it a look rarely changes a label, and the review is
+#: done when nothing above it is left.
+ASK_MIN_UNCERTAINTY = 0.1
 #: A component labelled guardrail on at least this many segments (of ``MIN_QUEUE_POINTS`` points
 #: or more) is a run an operator should see once (:func:`unchecked_runs`).
 UNCHECKED_RUN_MIN_SEGMENTS = 5
@@ -146,6 +151,35 @@ def segment_queue_scores(
         segments["component"], segments["label"], segments["n_points"], reviewed, score
     )
     return score + unchecked.astype(np.float64)
+
+
+def asked_segments(
+    segments: Mapping[str, np.ndarray],
+    reviewed: np.ndarray,
+    *,
+    min_uncertainty: float = ASK_MIN_UNCERTAINTY,
+    min_points: int = MIN_QUEUE_POINTS,
+) -> np.ndarray:
+    """(S,) bool: the segments the review queue asks an operator about.
+
+    Unreviewed (``reviewed`` (S,) bool False), of ``min_points`` points or more, and one of:
+    the correction changed the model's label ("disagrees"), it stands for a guardrail run
+    nobody has looked at (:func:`unchecked_runs`, "unchecked"), or the model's
+    :func:`uncertainty` is at least ``min_uncertainty`` ("uncertain"). When none is left, the
+    review of the run folder is done.
+    """
+    reviewed = np.asarray(reviewed, bool)
+    disagrees = np.asarray(segments["raw_label"], bool) != np.asarray(segments["label"], bool)
+    unchecked = unchecked_runs(
+        segments["component"],
+        segments["label"],
+        segments["n_points"],
+        reviewed,
+        segment_queue_scores(segments),
+    )
+    doubtful = uncertainty(segments["probability"]) >= min_uncertainty
+    big = np.asarray(segments["n_points"]) >= min_points
+    return ~reviewed & big & (disagrees | unchecked | doubtful)
 
 
 def queue_order(
