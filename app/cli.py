@@ -18,7 +18,7 @@ def add_serve_command(sub: argparse._SubParsersAction) -> None:
         "pages) and a viser 3D scene on the next port. Labels are kept per point in "
         "DRIVE/review/labels.sqlite with their history.",
     )
-    serve.add_argument("drive", type=Path, metavar="DRIVE")
+    serve.add_argument("drive", type=Path, metavar="DRIVE", help="drive folder to review")
     serve.add_argument(
         "--run", type=Path, metavar="RUN_DIR", help="the run folder (default: DRIVE/../run)"
     )
@@ -56,7 +56,7 @@ def add_serve_command(sub: argparse._SubParsersAction) -> None:
         help="where labels and fine-tuned models are kept (default: DRIVE/review)",
     )
     serve.add_argument(
-        "--window", type=float, default=100.0, help="metres of drive in the 3D scene (100)"
+        "--window", type=float, default=100.0, help="metres of drive in the 3D scene"
     )
     serve.add_argument(
         "--point-budget", type=int, default=400_000, help="most points in the 3D scene"

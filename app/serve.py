@@ -2,11 +2,18 @@
 
 from __future__ import annotations
 
+import errno
 import secrets
+import socket
 from collections.abc import Mapping, Sequence
+from contextlib import ExitStack
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import uvicorn
+import viser
+from fastapi import FastAPI
 
 from app.auth import TOKEN_ENV, is_loopback
 from app.jobs import JobRunner
@@ -15,7 +22,7 @@ from app.request_guard import allowed_hosts_for
 from app.scene.guarded_server import guarded_viser_server
 from app.scene.viewer import ReviewScene
 from app.session import ReviewSession
-from guardrail_core.errors import InvalidOptionError, RunFolderError
+from guardrail_core.errors import GuardrailError, InvalidOptionError, RunFolderError
 from guardrail_core.formats.run_folder_paths import RunFolder
 
 
@@ -81,7 +88,83 @@ def token_from(flag: str | None, file: Path | None, environ: Mapping[str, str]) 
     return token
 
 
-def serve(
+class PortInUseError(GuardrailError):
+    """The app's port is held by another server: nothing was started, printed or written."""
+
+
+def bind_app_port(host: str, port: int) -> socket.socket:
+    """The app's socket, bound to ``host:port`` before anything else starts: a taken port fails
+    before a URL is printed, and the port stays the app's while the run loads.
+
+    Raises
+    ------
+    PortInUseError
+        Another server holds the port.
+    InvalidOptionError
+        A port out of range, or an address this machine cannot serve on.
+    """
+    if not 0 <= port <= 65535:  # getaddrinfo would wrap it round
+        raise InvalidOptionError(f"--port: expected 0 to 65535, got {port}")
+    try:
+        family, kind, proto, _, address = socket.getaddrinfo(
+            host, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE
+        )[0]
+    except socket.gaierror as exc:
+        raise InvalidOptionError(f"--host {host}: not an address to serve on ({exc})") from exc
+    sock = socket.socket(family, kind, proto)
+    # As uvicorn binds: the port of a server just stopped (in TIME_WAIT) is free again.
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        sock.bind(address)
+    except OSError as exc:
+        sock.close()
+        if exc.errno == errno.EADDRINUSE:
+            raise PortInUseError(
+                f"port {port} on {host} is in use by another server; choose another with --port"
+            ) from exc
+        raise InvalidOptionError(f"--host {host} --port {port}: cannot bind ({exc})") from exc
+    return sock
+
+
+@dataclass
+class ReviewServers:
+    """The review app, ready to serve on its bound socket, and its 3D scene, serving already.
+
+    ``close`` stops both and closes the session.
+    """
+
+    app: FastAPI
+    app_socket: socket.socket
+    scene: viser.ViserServer
+    session: ReviewSession
+    jobs: JobRunner
+    host: str
+
+    @property
+    def port(self) -> int:
+        """The app's port (the one asked for, or the one the system gave for 0)."""
+        return int(self.app_socket.getsockname()[1])
+
+    def run(self) -> None:
+        """Serve the app on its socket until interrupted (Ctrl+C ends it quietly)."""
+        config = uvicorn.Config(self.app, host=self.host, port=self.port, log_level="warning")
+        server = uvicorn.Server(config)
+        try:
+            server.run(sockets=[self.app_socket])
+        except KeyboardInterrupt:  # uvicorn raises the signal again once it has shut down
+            pass
+        if not server.started:  # as uvicorn.run: a failed start (logged by uvicorn) exits 1
+            raise SystemExit(1)
+
+    def close(self) -> None:
+        """Stop the jobs and the scene, close the session and the app's socket."""
+        self.jobs.shutdown()
+        self.scene.stop()
+        self.session.close()
+        self.app_socket.close()
+
+
+def start_review(
     drive: Path,
     run: Path | None = None,
     *,
@@ -95,15 +178,17 @@ def serve(
     review_dir: Path | None = None,
     window_m: float = 100.0,
     point_budget: int = 400_000,
-) -> None:
-    """Serve the review app until interrupted.
+) -> ReviewServers:
+    """Check the options, bind the app's port, load the session, start the 3D scene and print
+    the URLs; :meth:`ReviewServers.run` then serves the app.
 
     Parameters
     ----------
     drive, run : the drive folder and its run folder (default: ``DRIVE/../run``)
     host : the address both servers bind to; beyond the loopback a token is required
     allowed_hosts : further host names the app answers (:func:`app.request_guard.allowed_hosts_for`)
-    port : the app's port; the 3D scene takes ``scene_port`` (default ``port + 1``)
+    port : the app's port; the 3D scene takes ``scene_port`` (default ``port + 1``), or the next
+        free one after it (viser moves on when it is taken: the URLs say which it took)
     token : every API call must carry it (``Authorization: Bearer`` or ``?token=``)
     operator : the name recorded with labels made in the 3D scene
     model_dir : the model folder that made the run, so it can be activated again
@@ -114,6 +199,8 @@ def serve(
     ------
     InvalidOptionError
         A host beyond the loopback without a token; a window or point budget out of range.
+    PortInUseError
+        The app's port is taken; raised before anything is printed or opened.
     """
     check_scene_options(window_m, point_budget)
     if not is_loopback(host) and not token:
@@ -122,39 +209,51 @@ def serve(
             "only those who have it can change labels"
         )
     run = run or default_run(drive)
-    scene_port = scene_port or port + 1
-    print(f"loading {drive} and {run} …", flush=True)
-    session = ReviewSession(
-        drive, run, review_dir=review_dir, operator=operator, model_dir=model_dir
-    )
-    jobs = JobRunner()
-    hosts = allowed_hosts_for(host, allowed_hosts)
-    server = guarded_viser_server(host, scene_port, allowed_hosts=hosts, token=token)
-    server.gui.configure_theme(control_width="large", show_share_button=False)
-    ReviewScene(
-        session,
-        server,
-        window_m=window_m,
-        point_budget=point_budget,
-        jobs=jobs,
-    )
-    app = create_app(
-        session,
-        token=token,
-        jobs=jobs,
-        scene_port=scene_port,
-        scene_clients=lambda: len(server.get_clients()),
-        allowed_hosts=hosts,
-    )
+    with ExitStack() as undo:  # a failure part way closes what was opened
+        app_socket = bind_app_port(host, port)
+        undo.callback(app_socket.close)
+        port = int(app_socket.getsockname()[1])
+        print(f"loading {drive} and {run} …", flush=True)
+        session = ReviewSession(
+            drive, run, review_dir=review_dir, operator=operator, model_dir=model_dir
+        )
+        undo.callback(session.close)
+        jobs = JobRunner()
+        undo.callback(jobs.shutdown)
+        hosts = allowed_hosts_for(host, allowed_hosts)
+        scene = guarded_viser_server(host, scene_port or port + 1, allowed_hosts=hosts, token=token)
+        undo.callback(scene.stop)
+        # A fixed panel beside the 3D view, not floating over it: nothing covers the selection.
+        scene.gui.configure_theme(
+            control_layout="fixed", control_width="medium", show_share_button=False
+        )
+        ReviewScene(session, scene, window_m=window_m, point_budget=point_budget, jobs=jobs)
+        # viser takes the next free port when the one asked for is taken: the page embeds, and
+        # the operator is shown, the port it listens on.
+        scene_port = scene.get_port()
+        app = create_app(
+            session,
+            token=token,
+            jobs=jobs,
+            scene_port=scene_port,
+            scene_clients=lambda: len(scene.get_clients()),
+            allowed_hosts=hosts,
+        )
+        undo.pop_all()
     shown = "127.0.0.1" if host in ("0.0.0.0", "::") else host
     # The token is never printed whole (terminals are logged and shared).
     query = f"?token={token[:2]}… (your token)" if token else ""
     print(f"review app: http://{shown}:{port}/{query}", flush=True)
     print(f"3D scene:   http://{shown}:{scene_port}", flush=True)
     print(f"labels:     {session.store.path}", flush=True)
+    return ReviewServers(app, app_socket, scene, session, jobs, host)
+
+
+def serve(drive: Path, run: Path | None = None, **options: Any) -> None:
+    """Serve the review app until interrupted: the servers of :func:`start_review` (which takes
+    the same arguments and raises what it raises), run, then closed."""
+    servers = start_review(drive, run, **options)
     try:
-        uvicorn.run(app, host=host, port=port, log_level="warning")
+        servers.run()
     finally:
-        jobs.shutdown()
-        server.stop()
-        session.close()
+        servers.close()

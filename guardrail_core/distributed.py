@@ -22,9 +22,8 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any, Generic, TypeVar
 
-from tqdm import tqdm
-
 from guardrail_core.errors import InvalidOptionError
+from guardrail_core.progress import progress_bar
 
 #: The Dask setting behind the environment variable its nanny sets in every worker it spawns.
 _TRIM_ENV = "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_"
@@ -176,7 +175,7 @@ def map_tasks(
     results: list[R | TaskFailure[T] | None] = [None] * len(items)
     done_points = 0
     start = time.perf_counter()
-    with tqdm(total=len(items), desc=desc, unit=unit, disable=not progress) as bar:
+    with progress_bar(total=len(items), desc=desc, unit=unit, enabled=progress) as bar:
 
         def record(i: int, result: R | TaskFailure[T]) -> None:
             nonlocal done_points
@@ -268,7 +267,9 @@ class LaterTasks(Generic[T, R]):
             from distributed.scheduler import KilledWorker
 
             position = {future.key: i for i, future in enumerate(self._futures)}
-            with tqdm(total=len(self._futures), desc=desc, unit=unit, disable=not progress) as bar:
+            with progress_bar(
+                total=len(self._futures), desc=desc, unit=unit, enabled=progress
+            ) as bar:
                 for future in as_completed(self._futures):
                     self._collect(future, position[future.key], KilledWorker)
                     bar.update()

@@ -6,6 +6,7 @@ import argparse
 import sys
 
 from guardrail_core.cli import (
+    common,
     demo,
     evaluate,
     export,
@@ -19,14 +20,26 @@ from guardrail_core.cli import (
 from guardrail_core.cli.plugins import add_plugin_commands
 from guardrail_core.errors import GuardrailError
 
-__all__ = ["build_parser", "main"]
+__all__ = ["build_parser", "main", "package_version"]
+
+
+def package_version() -> str:
+    """The installed distribution's version; the package's ``__version__`` where it is not
+    installed (run from a source tree), else "unknown"."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("guardrail")
+    except PackageNotFoundError:  # the package is imported already: this module is in it
+        return str(getattr(sys.modules["guardrail_core"], "__version__", "unknown"))
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = common.ArgumentParser(
         prog="guardrail",
         description="Find, reconstruct and review guardrails in mobile-mapping point clouds and images.",
     )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {package_version()}")
     subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     # The order of `guardrail --help`.
     for command in (simulate, info, train, process, evaluate, reconstruct, imports, export):

@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from guardrail_core.extract.pipeline import ExtractionParams
@@ -18,6 +18,40 @@ if TYPE_CHECKING:
 
 # What `add_parser` receives: the sub-parsers of `guardrail` or of `guardrail import`.
 Subparsers = argparse._SubParsersAction  # argparse has no public name for it
+
+
+class HelpFormatter(argparse.HelpFormatter):
+    """argparse's formatter, with each option's default appended to its help where the help
+    does not state it already.
+
+    argparse's own ArgumentDefaultsHelpFormatter appends to every option: "(default: None)" on
+    options that have none, "(default: False)" on flags, and a second default where the help
+    gives one in its own words. This one appends only a default worth reading.
+    """
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        help_text, default = action.help or "", action.default
+        if (
+            not action.option_strings  # a positional's default is its absence
+            or default is None
+            or default is argparse.SUPPRESS
+            or isinstance(default, bool)  # a flag
+            or (isinstance(default, (str, list, tuple)) and not default)
+            or "default" in help_text.lower()
+        ):
+            return action.help
+        shown = f"{default:g}" if isinstance(default, float) else str(default)
+        # argparse %-formats the help: a literal % in the value must be doubled.
+        return f"{help_text} (default: {shown.replace('%', '%%')})"
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """The parser of ``guardrail`` and, through ``add_subparsers``, of every sub-command: each
+    formats its help with :class:`HelpFormatter`."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("formatter_class", HelpFormatter)
+        super().__init__(*args, **kwargs)
 
 
 def options_parser() -> argparse.ArgumentParser:

@@ -18,11 +18,16 @@ def add_parser(subparsers: common.Subparsers) -> None:
         "(data_samples/scenes/sample.yaml) into --out, train a fast model on it (model/ beside "
         "it), process it (run/ beside it) and evaluate the run.",
     )
-    parser.add_argument("--out", type=Path, default=Path("demo_output/sample_drive"))
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=Path("demo_output/sample_drive"),
+        help="drive folder to simulate into; model/ and run/ go beside it",
+    )
     parser.add_argument(
         "--fresh", action="store_true", help="simulate again even if the drive exists"
     )
-    parser.add_argument("--quiet", action="store_true")
+    parser.add_argument("--quiet", action="store_true", help="no progress bars")
     parser.set_defaults(func=run)
 
 

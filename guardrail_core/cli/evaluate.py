@@ -10,7 +10,12 @@ from guardrail_core.cli import common
 
 def add_parser(subparsers: common.Subparsers) -> None:
     own = common.options_parser()
-    own.add_argument("drive", type=Path)
+    own.add_argument(
+        "drive",
+        type=Path,
+        metavar="DRIVE",
+        help="the drive folder, with its truth (a simulated drive)",
+    )
     own.add_argument("--run", type=Path, required=True, help="run folder (guardrail process)")
     own.add_argument("--json", action="store_true", help="print one JSON object instead")
     own.add_argument(

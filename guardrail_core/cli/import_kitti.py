@@ -12,7 +12,12 @@ def add_parser(subparsers: common.Subparsers) -> None:
     from guardrail_core.importers.kitti import KITTI_SENSOR_HEIGHT_M
 
     own = common.options_parser()
-    own.add_argument("sequence_dir", type=Path, metavar="SEQUENCE_DIR")
+    own.add_argument(
+        "sequence_dir",
+        type=Path,
+        metavar="SEQUENCE_DIR",
+        help="a KITTI odometry sequence folder (velodyne/, calib.txt, poses.txt, times.txt)",
+    )
     own.add_argument(
         "--frames",
         metavar="LIST",

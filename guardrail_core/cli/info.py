@@ -17,7 +17,7 @@ def add_parser(subparsers: common.Subparsers) -> None:
             "scale) and describe it."
         ),
     )
-    parser.add_argument("drive", type=Path)
+    parser.add_argument("drive", type=Path, metavar="DRIVE", help="drive folder to check")
     parser.set_defaults(func=run)
 
 

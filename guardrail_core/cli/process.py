@@ -11,7 +11,7 @@ from guardrail_core.cli import common
 
 def add_parser(subparsers: common.Subparsers) -> None:
     own = common.options_parser()
-    own.add_argument("drive", type=Path)
+    own.add_argument("drive", type=Path, metavar="DRIVE", help="drive folder to process")
     own.add_argument(
         "--model",
         type=Path,

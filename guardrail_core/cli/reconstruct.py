@@ -10,7 +10,7 @@ from guardrail_core.cli import common
 
 def add_parser(subparsers: common.Subparsers) -> None:
     own = common.options_parser()
-    own.add_argument("run_dir", type=Path, metavar="RUN_DIR")
+    own.add_argument("run_dir", type=Path, metavar="RUN_DIR", help="run folder (guardrail process)")
     own.add_argument(
         "--drive", type=Path, help="the drive of the run (default: the path in run.json)"
     )

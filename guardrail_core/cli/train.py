@@ -16,7 +16,13 @@ if TYPE_CHECKING:
 
 def add_parser(subparsers: common.Subparsers) -> None:
     own = common.options_parser()
-    own.add_argument("drives", type=Path, nargs="*", metavar="DRIVE")
+    own.add_argument(
+        "drives",
+        type=Path,
+        nargs="*",
+        metavar="DRIVE",
+        help="drive folders to train on, from their truth (none with --run)",
+    )
     own.add_argument(
         "--run",
         type=Path,

@@ -216,7 +216,7 @@ def embed_crops(
         RGB crops; S a multiple of 32 (128 by default in
         :class:`~guardrail_core.extract.classifier_params.ClassifierParams`).
     batch_size : int, crops per forward pass.
-    progress : bool, show a tqdm bar.
+    progress : bool, show a progress bar (on a terminal).
     runtime : ``auto``, ``onnxruntime`` or ``torch``; None: ``$GUARDRAIL_CNN_RUNTIME`` (see
         :mod:`~guardrail_core.extract.cnn_runtime`).
 

@@ -20,7 +20,6 @@ from typing import Any
 import numpy as np
 import torch
 from torch import nn
-from tqdm import tqdm
 
 from guardrail_core.errors import InvalidOptionError, TrainingDataError
 from guardrail_core.extract.backbone import (
@@ -36,6 +35,7 @@ from guardrail_core.extract.backbone import (
 from guardrail_core.extract.classifier_params import CLASS_NAMES, ClassifierParams
 from guardrail_core.extract.crop_classifier import GuardrailClassifier, make_head, model_version
 from guardrail_core.extract.torch_threads import one_thread
+from guardrail_core.progress import progress_bar
 
 _DEFAULTS = ClassifierParams()
 
@@ -186,8 +186,8 @@ def _fit_full(
         schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimiser, T_max=total)
         loss_fn = nn.CrossEntropyLoss(weight=_class_weights(labels))
         net.train()
-        with tqdm(
-            total=total, desc="fine-tuning", unit="step", disable=not progress, leave=False
+        with progress_bar(
+            total=total, desc="fine-tuning", unit="step", enabled=progress, leave=False
         ) as bar:
             for epoch in range(params.full_epochs):
                 order = torch.randperm(n, generator=generator).numpy()
@@ -264,7 +264,7 @@ def train_classifier(
     params : ClassifierParams
     trained_on : dict or None
         JSON-serialisable description of the data (drives, segment counts, ...), stored as is.
-    progress : bool, show tqdm bars.
+    progress : bool, show progress bars (on a terminal).
 
     Returns
     -------

@@ -26,9 +26,9 @@ from typing import Any
 import numpy as np
 import torch
 from torch import nn
-from tqdm import tqdm
 
 from guardrail_core.errors import InvalidOptionError, ModelError
+from guardrail_core.progress import progress_bar
 
 RUNTIMES = ("auto", "onnxruntime", "torch")
 RUNTIME_ENV = "GUARDRAIL_CNN_RUNTIME"
@@ -48,7 +48,7 @@ def batches(n: int, batch_size: int, *, progress: bool, desc: str) -> Iterator[s
         raise InvalidOptionError(
             f"batch_size: expected a positive whole number, got {batch_size!r}"
         )
-    with tqdm(total=n, desc=desc, unit="crop", disable=not progress, leave=False) as bar:
+    with progress_bar(total=n, desc=desc, unit="crop", enabled=progress, leave=False) as bar:
         for start in range(0, n, batch_size):
             stop = min(start + batch_size, n)
             yield slice(start, stop)

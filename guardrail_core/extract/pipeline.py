@@ -7,7 +7,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from tqdm import tqdm
 
 from guardrail_core.errors import EmptyDriveError
 from guardrail_core.extract.correct import CorrectionParams, SegmentExtents
@@ -36,6 +35,7 @@ from guardrail_core.extract.shape_features import segment_features
 from guardrail_core.formats.drive import Drive
 from guardrail_core.formats.run_folder import POINT_OFF_ROAD, POINT_ROAD
 from guardrail_core.params import ParameterError, StageParams, apply_settings
+from guardrail_core.progress import progress_bar
 from guardrail_core.sensors.track import TrackCoordinates, track_coordinates
 from guardrail_core.timing import StageTimer
 
@@ -213,8 +213,8 @@ def extract(
         drive, params, timer=timer, track=track
     )
     with timer.stage("crops", points=int(segments.n_points.sum())):
-        with tqdm(
-            total=len(drive.images), desc="choosing images", unit="image", disable=not progress
+        with progress_bar(
+            total=len(drive.images), desc="choosing images", unit="image", enabled=progress
         ) as bar:
             choice = choose_images(
                 drive.points.xyz,
@@ -259,7 +259,7 @@ def segment_crops(
     rows = np.asarray(rows, np.int64).reshape(-1)
     if (choice.status[rows] != CROP_OK).any():
         raise ValueError("segment_crops: a segment without a crop was asked for")
-    with tqdm(total=len(rows), desc="cutting crops", unit="crop", disable=not progress) as bar:
+    with progress_bar(total=len(rows), desc="cutting crops", unit="crop", enabled=progress) as bar:
         return cut_crops(
             lambda i: drive.read_image(drive.images[i]),
             choice.image[rows],

@@ -13,7 +13,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from tqdm import tqdm
 
 from guardrail_core.errors import InvalidOptionError, MissingDriveFileError, TrainingDataError
 from guardrail_core.extract.backbone import EMBEDDING_DIM, embed_crops
@@ -34,6 +33,7 @@ from guardrail_core.extract.segment_head import (
 )
 from guardrail_core.extract.segment_truth import segment_truth
 from guardrail_core.formats.drive import load_drive
+from guardrail_core.progress import progress_bar
 
 # Held-out metrics are measured on whole blocks of this many slices (10 m), so that neighbouring
 # slices of one guardrail never sit on both sides of the split.
@@ -212,7 +212,7 @@ def train_on_set(
         may then be None), else embeds ``data.crops``; full mode needs ``data.crops``
     params : crop classifier parameters (mode, seed, held-out fraction, threshold)
     head : segment head parameters
-    progress : show tqdm bars
+    progress : show progress bars (on a terminal)
     progress_fn : called as ``progress_fn(fraction, message)`` with fraction 0..1 before each
         step (embedding, crop classifier, each fold, segment head) and with 1.0 at the end
     trained_on : description of the data stored in ``info["trained_on"]``; the counts
@@ -391,7 +391,7 @@ def _out_of_fold_crop_proba(
     fold_params = dataclasses.replace(params, held_out_fraction=0.0)
     labels = data.labels[crop_rows]
     missing = 0
-    for k in tqdm(range(folds), desc="crop folds", unit="fold", disable=not progress):
+    for k in progress_bar(range(folds), desc="crop folds", unit="fold", enabled=progress):
         if on_fold is not None:
             on_fold(k)
         train, test = np.flatnonzero(fold != k), np.flatnonzero(fold == k)

@@ -30,7 +30,6 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from tqdm import tqdm
 
 from guardrail_core.errors import (
     FrameRangeError,
@@ -46,6 +45,7 @@ from guardrail_core.formats.drive import (
 )
 from guardrail_core.geom.frames import euler_from_rotation, invert_transform, make_transform
 from guardrail_core.importers.calibration import require_file
+from guardrail_core.progress import progress_bar
 from guardrail_core.sensors.camera import Camera
 from guardrail_core.sensors.lidar_models import rows_by_elevation
 from guardrail_core.sensors.scanner import azimuth_phase, imported_multibeam
@@ -352,7 +352,7 @@ def import_kitti(
     origin = np.zeros(3)
     scans = [
         read_scan(sequence.scan_path(f))
-        for f in tqdm(chosen, desc="reading scans", disable=not progress)
+        for f in progress_bar(chosen, desc="reading scans", enabled=progress)
     ]
     rings_of = [recover_rings(scan[:, :3]) for scan in scans]
     rings = max(found for _, found in rings_of)

@@ -32,7 +32,6 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from tqdm import tqdm
 
 from guardrail_core.errors import (
     InvalidOptionError,
@@ -66,6 +65,7 @@ from guardrail_core.importers.delivery_sources import (
     to_week_seconds,
     week_time_note,
 )
+from guardrail_core.progress import progress_bar
 from guardrail_core.sensors.camera import Camera
 from guardrail_core.sensors.scanner import ScannerParams
 from guardrail_core.sensors.trajectory import Trajectory
@@ -212,12 +212,12 @@ def _stream_points(
         folder, origin=origin, trajectory=trajectory, tile_m=tile_m, compress=compress
     )
     written = off_grid = 0
-    with tqdm(
+    with progress_bar(
         total=sum(f.points for f in files),
         desc="importing points",
         unit="pt",
         unit_scale=True,
-        disable=not progress,
+        enabled=progress,
         leave=False,
     ) as bar:
         for chunk in read_time_ordered(files, chunk_points):
@@ -388,8 +388,8 @@ def import_las_delivery(
     images = _image_records(source_images, cameras, local_trajectory, Path(images_csv or "images"))
 
     with staged_folder(out, overwrite=overwrite, inputs=inputs) as staging:
-        for source_path, record in tqdm(
-            images, desc="copying images", unit="image", disable=not progress, leave=False
+        for source_path, record in progress_bar(
+            images, desc="copying images", unit="image", enabled=progress, leave=False
         ):
             (staging / record.file).parent.mkdir(parents=True, exist_ok=True)
             shutil.copyfile(source_path, staging / record.file)

@@ -28,7 +28,6 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from tqdm import tqdm
 
 from guardrail_core.errors import MissingSourceFileError, SourceFormatError
 from guardrail_core.formats.atomic import check_output, staged_folder
@@ -38,6 +37,7 @@ from guardrail_core.importers.calibration import read_calibrations
 from guardrail_core.importers.kitti import MAX_SWEEPS, recover_rings
 from guardrail_core.importers.lidar_frames import FRAME_SUFFIXES, LidarFrame, read_lidar_frame
 from guardrail_core.importers.lidar_poses import read_frame_poses, read_frame_times
+from guardrail_core.progress import progress_bar
 from guardrail_core.sensors.camera import Camera
 from guardrail_core.sensors.lidar_models import (
     beams_from_points,
@@ -357,7 +357,9 @@ def import_lidar(
     if sensor_height_m is not None and not sensor_height_m > 0:
         raise SourceFormatError(f"--sensor-height must be positive, got {sensor_height_m} m")
 
-    read = [read_lidar_frame(p) for p in tqdm(paths, desc="reading frames", disable=not progress)]
+    read = [
+        read_lidar_frame(p) for p in progress_bar(paths, desc="reading frames", enabled=progress)
+    ]
     estimated = sensor_height_m is None
     if sensor_height_m is None:  # the densest layer of returns, then the road's plane there
         height = fit_road(read[0].xyz, estimate_sensor_height(read[0].xyz))[1]

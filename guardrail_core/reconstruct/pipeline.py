@@ -28,7 +28,6 @@ from typing import Any
 import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
-from tqdm import tqdm
 
 from guardrail_core.errors import (
     OutputExistsError,
@@ -45,6 +44,7 @@ from guardrail_core.formats.run_folder_paths import RunFolder
 from guardrail_core.formats.run_info import ReconstructionSummary
 from guardrail_core.io.meshes import export_mesh_files, write_meshes
 from guardrail_core.params import ParameterError, StageParams, apply_settings
+from guardrail_core.progress import progress_bar
 from guardrail_core.reconstruct.assemble import run_mesh
 from guardrail_core.reconstruct.beams import BeamParams, reconstruct_beam, unit_type
 from guardrail_core.reconstruct.inventory import (
@@ -486,7 +486,9 @@ def reconstruct_guardrails(
         xyz[np.asarray(guardrail, bool)], xyz[np.asarray(ground, bool)], trajectory, params
     )
     results = []
-    for done, run in enumerate(tqdm(runs, desc="reconstruct", unit="run", disable=not progress)):
+    for done, run in enumerate(
+        progress_bar(runs, desc="reconstruct", unit="run", enabled=progress)
+    ):
         if on_run is not None:
             on_run(done, len(runs))
         results.append(reconstruct_run_input(run, params, max_units))

@@ -73,7 +73,7 @@ class RunCrops:
         MissingDriveFileError
             An image the crops lie in is missing or unreadable.
         """
-        from tqdm import tqdm
+        from guardrail_core.progress import progress_bar
 
         segments = np.asarray(segments, np.int64).reshape(-1)
         table = self.run.segments
@@ -88,8 +88,8 @@ class RunCrops:
             s = int(segments[status != CROP_OK][0])
             name = CROP_STATUS_NAMES.get(int(table["crop_status"][s]), "?")
             raise RunFolderError(f"{self.run.root}: segment {s} has no crop (status {name})")
-        with tqdm(
-            total=len(segments), desc="cutting crops", unit="crop", disable=not progress
+        with progress_bar(
+            total=len(segments), desc="cutting crops", unit="crop", enabled=progress
         ) as bar:
             return cut_crops(
                 self._image,

@@ -18,13 +18,13 @@ from pathlib import Path
 
 import numpy as np
 import yaml
-from tqdm import tqdm
 
 from guardrail_core.classes import TruthClass
 from guardrail_core.errors import InvalidOptionError, MissingDriveFileError
 from guardrail_core.formats.atomic import staged_folder
 from guardrail_core.formats.drive import Drive, write_drive_metadata
 from guardrail_core.formats.drive_tiles import DEFAULT_DRIVE_TILE_M, TiledPointWriter
+from guardrail_core.progress import progress_bar
 from guardrail_core.synth.camera_rig import default_camera_rig
 from guardrail_core.synth.camera_shots import ShotWriter, shot_times
 from guardrail_core.synth.designs import DESIGNS_DIR
@@ -144,11 +144,11 @@ def simulate_drive(
             # A part is needed while the scanner (or a camera, about as far from the vehicle's
             # origin) may reach it.
             reach = scanner.max_range_m + float(np.linalg.norm(scanner.T_vehicle_scanner[:3, 3]))
-            with tqdm(
+            with progress_bar(
                 total=len(layout.parts),
                 desc="scene",
                 unit="part",
-                disable=not progress,
+                enabled=progress,
                 leave=False,
             ) as bar:
                 scene = SceneWindows(layout.parts, reach + 1.0, progress=bar.update)
@@ -174,19 +174,19 @@ def simulate_drive(
         counts = np.zeros(len(TruthClass), np.int64)
         next_shot = 0
         with (
-            tqdm(
+            progress_bar(
                 total=int(plan.units.sum()),
                 desc="scanning",
                 unit=plan.unit,
-                disable=not progress,
+                enabled=progress,
                 leave=False,
                 position=0,
             ) as scan_bar,
-            tqdm(
+            progress_bar(
                 total=len(shots) * len(cameras),
                 desc="cameras",
                 unit="img",
-                disable=not progress,
+                enabled=progress,
                 leave=False,
                 position=1,
             ) as camera_bar,
