@@ -120,12 +120,12 @@ class ImageOverlay:
             cv2.polylines(picture, [hull], True, tuple(int(c) for c in SELECTED), 2, cv2.LINE_AA)
         return picture
 
-    def pick(self, image: int, x: float, y: float) -> int | None:
-        """The segment of the point nearest the camera within :data:`PICK_RADIUS_PX` of pixel
+    def pick(self, image: int, x: float, y: float, radius: float = PICK_RADIUS_PX) -> int | None:
+        """The segment of the point nearest the camera within ``radius`` pixels of pixel
         (``x``, ``y``) of image ``image``; None where no segment's point lies there."""
         found = self.points(image)
         offset = found.pixel.astype(np.float64) - np.array([x, y])
-        near = np.flatnonzero(((offset**2).sum(axis=1) <= PICK_RADIUS_PX**2) & (found.segment >= 0))
+        near = np.flatnonzero(((offset**2).sum(axis=1) <= radius**2) & (found.segment >= 0))
         if len(near) == 0:
             return None
         return int(found.segment[near[np.argmin(found.depth[near])]])

@@ -70,6 +70,7 @@ class Job:
     finished: float | None = None
     time_limit_s: float = DEFAULT_TIME_LIMIT_S
     cancel_requested: bool = False
+    on_end: Callable[[Job], None] | None = None  # told how it ended, on the job's thread
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -92,8 +93,9 @@ class JobRunner:
         self._jobs: dict[str, Job] = {}
         self._lock = threading.Lock()
 
-    def submit(self, kind: str, work: Work) -> Job:
-        """Queue ``work`` as a job of ``kind``.
+    def submit(self, kind: str, work: Work, on_end: Callable[[Job], None] | None = None) -> Job:
+        """Queue ``work`` as a job of ``kind``; ``on_end(job)`` is called once it has ended
+        (done, failed or cancelled after it started).
 
         Raises
         ------
@@ -104,6 +106,7 @@ class JobRunner:
             id=uuid.uuid4().hex[:12],
             kind=kind,
             time_limit_s=TIME_LIMIT_S.get(kind, DEFAULT_TIME_LIMIT_S),
+            on_end=on_end,
         )
         with self._lock:
             for other in self._jobs.values():
@@ -171,8 +174,13 @@ class JobRunner:
         else:
             job.progress = 1.0
             job.status = "done"
-        finally:
-            job.finished = time.time()
+        # Told before the job counts as finished, so that whoever waits on it sees what it did.
+        if job.on_end is not None:
+            try:
+                job.on_end(job)
+            except Exception:  # whoever listens must not take the runner down
+                traceback.print_exc()
+        job.finished = time.time()
 
     def wait(self, job_id: str, timeout: float = 60.0) -> Job:
         """Block until the job ends (for tests and scripts)."""
@@ -181,7 +189,7 @@ class JobRunner:
             job = self.get(job_id)
             if job is None:
                 raise KeyError(job_id)
-            if job.status in ("done", "failed", "cancelled"):
+            if job.finished is not None:
                 return job
             if time.monotonic() > deadline:
                 raise TimeoutError(f"job {job_id} still {job.status} after {timeout} s")

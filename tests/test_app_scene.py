@@ -11,6 +11,7 @@ import viser
 import viser.transforms as vtf
 from fastapi.testclient import TestClient
 
+from app.jobs import JobRunner
 from app.main import create_app
 from app.route_overview import run_places
 from app.scene.colours import GUARDRAIL, OTHER, SELECTED, point_colours, probability_colours
@@ -206,6 +207,10 @@ def test_the_tuning_panel_plots_each_run_s_histogram_or_section(
         scene.show_unit_plot()
         expected = unit_numbers(run.run_id, tuner.unit(run.run_id, tuner.params), tuner.params)
         assert f"run {run.run_id}:" in scene._tune_text.content
+        # Only the sliders of the run's kind show: a beam has no pipes to tune.
+        kind = "pipes" if run.model is not None and run.model.type == "pipe" else "beams"
+        for (stage, _), slider in scene._sliders.items():
+            assert slider.visible == (stage == kind), (run.run_id, stage)
         if expected["x_m"] is None:  # a beam: its section, no histogram
             assert scene._section.visible and not scene._histogram.visible
             z_by_height = np.asarray(expected["section"])
@@ -236,6 +241,84 @@ def test_the_tuning_panel_plots_each_run_s_histogram_or_section(
         assert scene._histogram.data[2][0] == moved["threshold"] != expected["threshold"]
         factor.value = old
     assert 1 <= pipe_runs < len(runs), "the test street has pipe runs and a beam run"
+
+
+def test_choosing_a_run_flies_there_and_apply_says_done_and_keeps_it(
+    session: ReviewSession,
+) -> None:
+    """Choosing a run in the tuning panel moves the window to it; *Apply to the whole drive*
+    reconstructs in a background job, then says so, the same run still chosen."""
+    server = viser.ViserServer(host="127.0.0.1", port=18_490, verbose=False)
+    jobs = JobRunner()
+    try:
+        # An 8 m window on the 32 m test drive, so that a run can lie outside it.
+        scene = ReviewScene(session, server, window_m=8.0, point_budget=50_000, jobs=jobs)
+        options = list(scene._run_choice.options)
+        assert len(options) >= 2
+        last = options[-1]
+        run_id = int(last.split()[1])
+        poles = scene._tuner.run(run_id).poles  # type: ignore[union-attr]
+        middle = np.asarray(poles[len(poles) // 2].position)
+        trajectory = session.drive.trajectory.position
+        nearest = int(np.argmin(np.linalg.norm(trajectory - middle, axis=1)))
+        station = scene.vehicle_station[nearest]
+        lo, hi = scene.station_range
+        scene.show_window(hi if station < (lo + hi) / 2 else lo)  # far from it
+        assert not scene.start_m <= station < scene.start_m + scene.window_m
+        scene._run_choice.value = last
+        scene._on_run_chosen()
+        assert scene.start_m <= station < scene.start_m + scene.window_m
+        scene.apply_tuning()
+        (job,) = jobs.list("reconstruct")
+        assert jobs.wait(job.id, timeout=600).status == "done"
+        assert scene._tune_text.content.startswith("**Applied:**"), scene._tune_text.content
+        assert scene._run_choice.value == last
+        scene.close()
+    finally:
+        jobs.shutdown()
+        server.stop()
+
+
+def test_layers_point_size_and_the_colour_legend(
+    scene: ReviewScene, session: ReviewSession, drive: Drive
+) -> None:
+    """Points, the points labelled other, meshes and cameras can be hidden (the cameras are at
+    first: their frusta hid the selection); the point size changes; the legend follows the
+    colour mode; the meshes are not near-white."""
+    shown = scene.shown
+    n_guardrail = int(
+        ((shown.segment >= 0) & session.effective_label()[np.maximum(shown.segment, 0)]).sum()
+    )
+    assert 0 < n_guardrail < len(shown)
+    assert len(scene._cloud.points) == len(shown)  # type: ignore[union-attr]
+    scene.show_layer("other", False)
+    assert len(scene._cloud.points) == n_guardrail  # type: ignore[union-attr]
+    picked = scene._segment_points()
+    assert len(picked) == n_guardrail and session.effective_label()[picked.segment].all()
+    scene.show_layer("other", True)
+    assert len(scene._cloud.points) == len(shown)  # type: ignore[union-attr]
+    scene.show_layer("points", False)
+    assert not scene._cloud.visible and len(scene._segment_points()) == 0  # type: ignore[union-attr]
+    scene.show_layer("points", True)
+    assert scene._cloud.visible  # type: ignore[union-attr]
+
+    assert drive.images and scene._frusta == []
+    scene.show_layer("cameras", True)
+    assert len(scene._frusta) > 0
+    scene.show_layer("cameras", False)
+    assert scene._frusta == []
+
+    assert scene._meshes, "the test street's runs have meshes"
+    for handle in scene._meshes.values():
+        assert handle.visible and min(handle.color) < 100  # type: ignore[union-attr]
+    scene.show_layer("meshes", False)
+    assert not any(handle.visible for handle in scene._meshes.values())
+    scene.show_layer("meshes", True)
+
+    assert "P(guardrail)" not in scene._legend.content
+    scene.mode = "probability"
+    scene.recolour()
+    assert "P(guardrail)" in scene._legend.content and "linear-gradient" in scene._legend.content
 
 
 def _click(client: object, screen: tuple[float, float]) -> SimpleNamespace:

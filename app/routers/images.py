@@ -9,7 +9,7 @@ from fastapi import APIRouter, Depends, HTTPException, Query
 from fastapi.responses import Response
 
 from app.dependencies import get_session
-from app.image_overlay import encode_png
+from app.image_overlay import PICK_RADIUS_PX, encode_png
 from app.schemas import NOT_FOUND, PNG, Picked
 from app.session import ReviewSession
 from guardrail_core.errors import MissingDriveFileError
@@ -49,11 +49,20 @@ def pick(
     image_id: int,
     x: Annotated[float, Query(ge=0, description="column, image pixels")],
     y: Annotated[float, Query(ge=0, description="row, image pixels")],
+    radius: Annotated[
+        float,
+        Query(
+            ge=0.5,
+            le=200,
+            description="image pixels a point may lie from (x, y): the page sends a few screen "
+            "pixels' worth at the scale it shows the image",
+        ),
+    ] = PICK_RADIUS_PX,
 ) -> dict[str, int | None]:
-    """The segment whose point, nearest the camera, lies within a few pixels of (x, y) on the
-    image; null where none does."""
+    """The segment whose point, nearest the camera, lies within ``radius`` pixels of (x, y) on
+    the image; null where none does."""
     i = _image(session, image_id)
     width, height = session.overlay.size(i)
     if not (np.isfinite(x) and np.isfinite(y) and x < width and y < height):
         raise HTTPException(422, detail=f"({x}, {y}) lies outside the {width} x {height} px image")
-    return {"image": i, "segment": session.overlay.pick(i, x, y)}
+    return {"image": i, "segment": session.overlay.pick(i, x, y, radius)}

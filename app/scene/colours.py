@@ -79,3 +79,38 @@ def point_colours(
         raise ValueError(f"colour mode: expected one of {COLOUR_MODES}, got {mode!r}")
     colours[inside & selected[np.maximum(point_segment, 0)]] = SELECTED
     return colours
+
+
+def _css(colour: np.ndarray) -> str:
+    return "rgb({}, {}, {})".format(*(int(c) for c in colour))
+
+
+def _swatch(colour: np.ndarray, text: str) -> str:
+    return (
+        f'<span style="display:inline-block;width:10px;height:10px;border-radius:2px;'
+        f'background:{_css(colour)};margin:0 4px 0 8px"></span>{text}'
+    )
+
+
+def colour_legend(mode: str) -> str:
+    """HTML: what the colours of ``mode`` (one of :data:`COLOUR_MODES`) mean."""
+    common = [_swatch(ROAD, "road"), _swatch(OFF_ROAD, "no segment"), _swatch(SELECTED, "selected")]
+    if mode == "probability":
+        stops = ", ".join(_css(c) for c in _RAMP)
+        scale = (
+            '<div style="height:10px;border-radius:3px;margin:2px 8px;'
+            f'background:linear-gradient(to right, {stops})"></div>'
+            '<div style="display:flex;justify-content:space-between;margin:0 8px">'
+            "<span>0 %</span><span>P(guardrail)</span><span>100 %</span></div>"
+        )
+        items = [_swatch(NO_VALUE, "no probability"), *common]
+        return f'<div style="font-size:12px">{scale}{"".join(items)}</div>'
+    if mode not in COLOUR_MODES:
+        raise ValueError(f"colour mode: expected one of {COLOUR_MODES}, got {mode!r}")
+    meaning = {"label": "label", "prediction": "raw prediction", "truth": "truth"}[mode]
+    items = [
+        _swatch(GUARDRAIL, f"guardrail ({meaning})"),
+        _swatch(OTHER, "other"),
+        *common,
+    ]
+    return f'<div style="font-size:12px;line-height:1.8">{"".join(items)}</div>'

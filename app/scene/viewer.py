@@ -21,33 +21,30 @@ import trimesh
 import viser
 import viser.transforms as vtf
 
-from app import review_jobs
-from app.jobs import JobBusyError, JobRunner
+from app.jobs import JobRunner
 from app.route_overview import run_stations
 from app.run_tiles import TilePoints
-from app.scene.colours import COLOUR_MODES, SELECTED, point_colours
+from app.scene.colours import COLOUR_MODES, SELECTED, colour_legend, point_colours
 from app.scene.picking import in_polygon, in_rectangle, pick_along_ray, project_to_screen
-from app.scene.tuning import TUNABLE, RunTuner, slider_value, unit_numbers, with_value
+from app.scene.tuning import RunTuner
+from app.scene.tuning_panel import MESH_COLOUR, TuningPanel, mesh_node
 from app.scene.window import window_points
 from app.session import ReviewSession
-from guardrail_core.errors import GuardrailError, RunFolderError
+from guardrail_core.errors import RunFolderError
 from guardrail_core.formats.drive_tiles import vehicle_station
-from guardrail_core.io.meshes import run_file_stem
-from guardrail_core.reconstruct.assemble import run_mesh
-from guardrail_core.reconstruct.pipeline import ReconstructionParams
 
 #: The selection panel without a selection: picking is the scene's, labelling the page's.
 NO_SELECTION = "Click a point to select its segment (shift + drag: many); label it on the page."
-#: Mesh colours: the reconstruction, a retuned run, and the ghost of its previous mesh.
-MESH_COLOUR = (230, 230, 235)
-TUNED_COLOUR = (60, 200, 120)
-GHOST_COLOUR = (150, 150, 150)
-GHOST_OPACITY = 0.3
-#: Seconds to wait after the last slider move before re-running (sliders fire on every step).
-DEBOUNCE_S = 0.15
-#: The scene folder of the reconstructed meshes.
-MESH_NODES = "/reconstruction"
 #: The lasso being drawn: its node, colour, and how far in front of the camera (metres).
+#: The layers an operator can show or hide, and whether each shows at first: the camera frusta
+#: stand in the foreground, between the road and the rails, and hide the selection.
+LAYERS = {
+    "points": "Points",
+    "other": "Points labelled other",
+    "meshes": "Meshes",
+    "cameras": "Cameras",
+}
+LAYERS_SHOWN = {"points": True, "other": True, "meshes": True, "cameras": False}
 LASSO_NODE = "/lasso"
 LASSO_COLOUR = (255, 0, 220)
 LASSO_DRAW_M = 2.0
@@ -57,7 +54,7 @@ LASSO_HELP = (
 )
 
 
-class ReviewScene:
+class ReviewScene(TuningPanel):
     """The viser scene and GUI of one review session.
 
     Parameters
@@ -90,6 +87,8 @@ class ReviewScene:
         self.start_m = self.station_range[0]
         self.shown = TilePoints.concatenate([])  # the drive points now shown
         self.mode = "label"
+        self.layers = dict(LAYERS_SHOWN)
+        self.point_size_m = 0.04
         self._lock = threading.RLock()
         self._cloud: viser.PointCloudHandle | None = None
         self._frusta: list[viser.CameraFrustumHandle] = []
@@ -136,14 +135,7 @@ class ReviewScene:
                     window.station, window.segment, start_m, self.window_m, self.point_budget
                 )
             )
-            self._cloud = self.server.scene.add_point_cloud(
-                "/drive/points",
-                points=self.shown.xyz.astype(np.float32),
-                colors=self._colours(),
-                point_size=0.04,
-                point_shape="circle",
-                precision="float32",
-            )
+            self._send_cloud()
         self._add_cameras()
         self.show_meshes_near()
         self._window_text.content = (
@@ -151,6 +143,28 @@ class ReviewScene:
             f"{hi - lo:.0f} m · {len(self.shown):,} points"
         )
         return time.perf_counter() - clock
+
+    def _send_cloud(self) -> None:
+        """Send the window's points (those the layers show) with their colours."""
+        keep = self._kept()
+        self._cloud = self.server.scene.add_point_cloud(
+            "/drive/points",
+            points=self.shown.xyz[keep].astype(np.float32),
+            colors=self._colours()[keep],
+            point_size=self.point_size_m,
+            point_shape="circle",
+            precision="float32",
+            visible=self.layers["points"],
+        )
+
+    def _kept(self) -> np.ndarray | slice:
+        """The points shown that the layers keep: all, or, with the layer "points labelled
+        other" off, those of segments labelled guardrail."""
+        if self.layers["other"]:
+            return slice(None)
+        segment = self.shown.segment
+        label = self.session.effective_label()
+        return (segment >= 0) & label[np.maximum(segment, 0)]
 
     def _colours(self) -> np.ndarray:
         session = self.session
@@ -177,8 +191,11 @@ class ReviewScene:
         returns the seconds it took."""
         clock = time.perf_counter()
         with self._lock:
-            if self._cloud is not None:
+            if not self.layers["other"]:  # which points show follows the labels
+                self._send_cloud()
+            elif self._cloud is not None:
                 self._cloud.colors = self._colours()
+        self._legend.content = colour_legend(self.mode)
         return time.perf_counter() - clock
 
     def _add_trajectory(self) -> None:
@@ -207,7 +224,7 @@ class ReviewScene:
         inside = np.flatnonzero(
             (station >= self.start_m) & (station < self.start_m + self.window_m)
         )
-        for i in inside:
+        for i in inside if self.layers["cameras"] else ():
             image = drive.images[i]
             camera = drive.cameras[image.camera]
             fov = 2 * np.arctan2(camera.height / 2, camera.K[1, 1])
@@ -217,7 +234,7 @@ class ReviewScene:
                     f"/drive/cameras/{i:05d}",
                     fov=float(fov),
                     aspect=camera.width / camera.height,
-                    scale=0.4,
+                    scale=0.25,
                     color=(255, 200, 40),
                     wxyz=vtf.SO3.from_matrix(T[:3, :3]).wxyz,
                     position=T[:3, 3],
@@ -255,8 +272,14 @@ class ReviewScene:
             first, last = self._mesh_stations.get(run_id, (-np.inf, np.inf))  # no poles: always
             near = first <= hi and last >= lo
             if near and run_id not in self._meshes:
-                self._meshes[run_id] = self.server.scene.add_glb(
-                    _mesh_node(run_id), glb_data=path.read_bytes()
+                mesh = trimesh.load(path, file_type="glb", force="mesh")
+                assert isinstance(mesh, trimesh.Trimesh)  # force="mesh" joins the scene's
+                self._meshes[run_id] = self.server.scene.add_mesh_simple(
+                    mesh_node(run_id),
+                    vertices=mesh.vertices.astype(np.float32),
+                    faces=mesh.faces.astype(np.uint32),
+                    color=MESH_COLOUR,
+                    visible=self.layers["meshes"],
                 )
             elif not near and run_id in self._meshes and run_id not in self._shown_mesh:
                 self._meshes.pop(run_id).remove()
@@ -264,9 +287,14 @@ class ReviewScene:
     # -- picking ----------------------------------------------------------------------------
 
     def _segment_points(self) -> TilePoints:
-        """The points shown that lie in a segment (what a click or a rectangle may pick)."""
+        """The points shown that lie in a segment and that the layers show (what a click or a
+        rectangle may pick)."""
         shown = self.shown
-        return shown.take(np.flatnonzero(shown.segment >= 0))
+        keep = np.zeros(len(shown), bool)
+        keep[self._kept()] = True
+        if not self.layers["points"]:
+            keep[:] = False
+        return shown.take(np.flatnonzero(keep & (shown.segment >= 0)))
 
     def _on_click(self, event: viser.SceneClickEvent) -> None:
         if self._lasso is not None:
@@ -376,11 +404,15 @@ class ReviewScene:
         target = self.session.run.segments["centroid"][segment]
         trajectory = self.session.drive.trajectory
         scanned = float(np.mean(self.session.run.segments["time"][segment]))
-        station = float(np.interp(scanned, trajectory.time, self.vehicle_station))
+        self._fly_to_place(target, float(np.interp(scanned, trajectory.time, self.vehicle_station)))
+
+    def _fly_to_place(self, target: np.ndarray, station: float, distance_m: float = 8.0) -> None:
+        """Move the window to ``station`` (metres along the drive) if it lies outside, and every
+        browser's camera to look at ``target`` (3,) from ``distance_m``."""
         if not self.start_m <= station < self.start_m + self.window_m:
             self.show_window(station - self.window_m / 2)
         for client in self.server.get_clients().values():
-            self._look_at(client, target, distance_m=8.0)
+            self._look_at(client, target, distance_m=distance_m)
 
     def _look_at(self, client: viser.ClientHandle, target: np.ndarray, distance_m: float) -> None:
         """Put a browser's camera above the trajectory beside ``target``, looking at it."""
@@ -427,6 +459,24 @@ class ReviewScene:
         if event == "selection" and len(segments) and self._fly_on_select:
             self.fly_to(int(segments[0]))
 
+    def _layer_toggle(self, name: str, box: Any) -> Any:
+        """The callback of layer ``name``'s checkbox."""
+        return lambda _: self.show_layer(name, box.value)
+
+    def show_layer(self, name: str, on: bool) -> None:
+        """Show or hide a layer of :data:`LAYERS`."""
+        self.layers[name] = bool(on)
+        with self._lock:
+            if name == "points" and self._cloud is not None:
+                self._cloud.visible = self.layers["points"]
+            elif name == "other":
+                self._send_cloud()
+            elif name == "meshes":
+                for handle in [*self._meshes.values(), *self._ghosts.values()]:
+                    handle.visible = self.layers["meshes"]
+        if name == "cameras":
+            self._add_cameras()
+
     def step(self, direction: int) -> None:
         """Move the window back (-1) or forward (+1) along the trajectory, overlapping by 20%."""
         self.show_window(self.start_m + direction * 0.8 * self.window_m)
@@ -438,14 +488,31 @@ class ReviewScene:
 
         with gui.add_folder("View"):
             mode = gui.add_dropdown("Colour by", COLOUR_MODES, initial_value="label")
+            self._legend = gui.add_html(colour_legend(self.mode))
             self._window_text = gui.add_markdown("")
             back = gui.add_button("◀ Back", icon=None)
             forward = gui.add_button("Forward ▶")
+            size = gui.add_slider(
+                "Point size (cm)", min=1, max=15, step=1, initial_value=100 * self.point_size_m
+            )
+            layers = {
+                name: gui.add_checkbox(label, initial_value=self.layers[name])
+                for name, label in LAYERS.items()
+            }
 
         @mode.on_update
         def _(_: Any) -> None:
             self.mode = mode.value
             self.recolour()
+
+        @size.on_update
+        def _(_: Any) -> None:
+            self.point_size_m = float(size.value) / 100
+            if self._cloud is not None:
+                self._cloud.point_size = self.point_size_m
+
+        for name, box in layers.items():
+            box.on_update(self._layer_toggle(name, box))
 
         back.on_click(lambda _: self.step(-1))
         forward.on_click(lambda _: self.step(+1))
@@ -460,43 +527,7 @@ class ReviewScene:
         self._lasso_close.on_click(lambda _: self._close_lasso_clicked())
         self._lasso_cancel.on_click(lambda _: self.cancel_lasso())
 
-        with gui.add_folder("Reconstruction", expand_by_default=False):
-            self._run_choice = gui.add_dropdown("Guardrail run", ("none",), initial_value="none")
-            self._sliders: dict[tuple[str, str], Any] = {}
-            defaults = ReconstructionParams()
-            for (stage, name), (label, lo, hi, step) in TUNABLE.items():
-                value = getattr(getattr(defaults, stage), name)
-                slider = gui.add_slider(label, min=lo, max=hi, step=step, initial_value=value)
-                slider.on_update(lambda _: self._schedule_tune())
-                self._sliders[(stage, name)] = slider
-            self._histogram = gui.add_uplot(
-                data=(np.zeros(2), np.zeros(2), np.zeros(2), np.zeros(2)),
-                series=(
-                    {"label": "x (m)"},
-                    {"label": "points per bin", "stroke": "#4e79a7", "fill": "#4e79a733"},
-                    {"label": "threshold", "stroke": "#e15759", "dash": (6.0, 4.0)},
-                    {"label": "vertical pipes", "stroke": "#f28e2b", "fill": "#f28e2b88"},
-                ),
-                title="x histogram (vertical pipes)",
-                scales={"x": {"time": False}},  # metres, not a time axis
-                aspect=2.0,
-            )
-            self._section = gui.add_uplot(
-                data=(np.zeros(2), np.zeros(2)),
-                series=(
-                    {"label": "height y (m)"},
-                    {"label": "depth z (m)", "stroke": "#4e79a7", "width": 2.0},
-                ),
-                title="beam section (depth by height)",
-                scales={"x": {"time": False}},
-                aspect=2.0,
-                visible=False,
-            )
-            self._tune_text = gui.add_markdown("")
-            apply = gui.add_button("Apply to the whole drive")
-
-        self._run_choice.on_update(lambda _: self._on_run_chosen())
-        apply.on_click(lambda _: self.apply_tuning())
+        self._build_tuning_gui(gui)
 
     def _show_selection(self) -> None:
         session = self.session
@@ -526,166 +557,6 @@ class ReviewScene:
             "label it on the page beside the scene (g, o)"
         )
 
-    # -- tuning -----------------------------------------------------------------------------
-
-    def _update_tuning_runs(self) -> None:
-        """Offer the runs with a unit model and set the sliders to their parameters, without
-        re-running anything (no operator moved them)."""
-        self._quiet_sliders = True
-        try:
-            runs = self._tuner.tunable_runs() if self._tuner is not None else []
-            options = tuple(
-                f"run {r.run_id} ({r.model.type}, {len(r.units)} units)"
-                for r in runs
-                if r.model is not None
-            ) or ("none",)
-            self._run_choice.options = options
-            self._run_choice.value = options[0]  # type: ignore[misc]
-            if self._tuner is not None:
-                params = self._tuner.params
-                for (stage, name), slider in self._sliders.items():
-                    slider.value = getattr(getattr(params, stage), name)
-        finally:
-            self._quiet_sliders = False
-        self.show_unit_plot()
-
-    def _chosen_run(self) -> int | None:
-        value = self._run_choice.value
-        return None if value == "none" else int(value.split()[1])
-
-    def _schedule_tune(self) -> None:
-        if self._quiet_sliders:
-            return
-        if self._tune_timer is not None:
-            self._tune_timer.cancel()
-        self._tune_timer = threading.Timer(DEBOUNCE_S, self.retune)
-        self._tune_timer.daemon = True
-        self._tune_timer.start()
-
-    def slider_params(self) -> ReconstructionParams:
-        """The reconstruction parameters with the sliders' values."""
-        tuner = self._tuner
-        params = tuner.params if tuner is not None else ReconstructionParams()
-        for (stage, name), slider in self._sliders.items():
-            default = float(getattr(getattr(params, stage), name))
-            value = slider_value((stage, name), slider.value, default)
-            params = with_value(params, stage, name, value)
-        return params
-
-    def retune(self) -> float | None:
-        """Re-run the chosen run's unit model with the sliders' values and show its mesh, the
-        previous one ghosted; returns the seconds the re-run took."""
-        with self._tune_lock:
-            return self._retune()
-
-    def _retune(self) -> float | None:
-        run_id = self._chosen_run()
-        if self._tuner is None or run_id is None:
-            return None
-        params = self.slider_params()
-        try:
-            result = self._tuner.retune(run_id, params)
-        except (GuardrailError, ValueError) as exc:
-            self._tune_text.content = f"**Not re-run:** {exc}"
-            return None
-        name = _mesh_node(run_id)
-        previous = self._meshes.pop(run_id, None)
-        ghost = self._shown_mesh.get(run_id)
-        if ghost is None:  # first re-run: the ghost is the reconstruction's own mesh
-            ghost = run_mesh(self._tuner.run(run_id), self._tuner.params.sweep)
-        if previous is not None:
-            previous.remove()
-        if ghost is not None:
-            self._ghosts[run_id] = self.server.scene.add_mesh_simple(
-                _mesh_node(run_id, ghost=True),
-                vertices=ghost.vertices.astype(np.float32),
-                faces=ghost.faces.astype(np.uint32),
-                color=GHOST_COLOUR,
-                opacity=GHOST_OPACITY,
-            )
-        mesh: trimesh.Trimesh = result.mesh
-        self._meshes[run_id] = self.server.scene.add_mesh_simple(  # type: ignore[assignment]
-            name,
-            vertices=mesh.vertices.astype(np.float32),
-            faces=mesh.faces.astype(np.uint32),
-            color=TUNED_COLOUR,
-        )
-        self._shown_mesh[run_id] = mesh
-        self.last_tune_seconds = result.seconds
-        self._plot_unit(unit_numbers(run_id, result.unit, params), result.seconds)
-        return result.seconds
-
-    def _on_run_chosen(self) -> None:
-        """Plot the chosen run's histogram (or section) as its model has it, then re-run it
-        with the sliders' values."""
-        if not self._quiet_sliders:
-            self.show_unit_plot()
-            self._schedule_tune()
-
-    def show_unit_plot(self) -> None:
-        """Plot the chosen run's x histogram with its threshold and vertical pipes (pipes) or
-        its section curve (beams), with the sliders' values; no mesh changes."""
-        run_id = self._chosen_run()
-        if self._tuner is None or run_id is None:
-            return
-        params = self.slider_params()
-        try:
-            unit = self._tuner.unit(run_id, params)
-        except (GuardrailError, ValueError, KeyError) as exc:
-            self._tune_text.content = f"**Not re-run:** {exc}"
-            return
-        self._plot_unit(unit_numbers(run_id, unit, params), None)
-
-    def _plot_unit(self, numbers: dict[str, Any], seconds: float | None) -> None:
-        """Show ``unit_numbers``: the histogram or the section, and a line of text."""
-        run_id = numbers["run_id"]
-        if numbers["x_m"] is not None:
-            x = np.asarray(numbers["x_m"], np.float64)
-            counts = np.asarray(numbers["counts"], np.float64)
-            half = 0.5 * numbers["bin_m"]
-            marked = np.zeros(len(x))
-            for pipe in numbers["pipes"]:
-                if pipe["kind"] == "vertical":
-                    inside = (x >= pipe["x_min_m"] - half) & (x <= pipe["x_max_m"] + half)
-                    marked[inside] = counts[inside]
-            self._histogram.data = (x, counts, np.full(len(x), numbers["threshold"]), marked)
-        if numbers["section"] is not None:
-            section = np.asarray(numbers["section"], np.float64).reshape(-1, 2)  # [z, y]
-            order = np.argsort(section[:, 1], kind="stable")
-            self._section.data = (section[order, 1], section[order, 0])
-        self._histogram.visible = numbers["x_m"] is not None
-        self._section.visible = numbers["section"] is not None
-        pipes = numbers["pipes"]
-        if numbers["type"] == "pipe":
-            kinds = sorted({p["kind"] for p in pipes})
-            what = f"{len(pipes)} pipes: " + ", ".join(
-                _pipe_kind(kind, [1000 * p["radius_m"] for p in pipes if p["kind"] == kind])
-                for kind in kinds
-            )
-        else:
-            n = 0 if numbers["section"] is None else len(numbers["section"])
-            what = f"beam section of {n} points"
-        if numbers["threshold"] is not None:
-            what += (
-                f" · threshold {numbers['threshold']:.1f} points/bin "
-                f"(factor {numbers['histogram_factor']:.1f})"
-            )
-        timing = "" if seconds is None else f" · {1000 * seconds:.0f} ms"
-        self._tune_text.content = f"run {run_id}: {what}{timing}"
-
-    def apply_tuning(self) -> None:
-        """Reconstruct the whole drive with the sliders' values (a background job); the new
-        parameters are saved in ``reconstruction/models.json``."""
-        if self._tuner is None or self.jobs is None:
-            return
-        params = self.slider_params()
-        try:
-            job = self.jobs.submit("reconstruct", review_jobs.reconstruct(self.session, params))
-        except JobBusyError as exc:
-            self._tune_text.content = f"not now: {exc}"
-            return
-        self._tune_text.content = f"reconstructing the drive (job {job.id})…"
-
 
 def _camera_pose(camera: viser.CameraHandle) -> np.ndarray:
     """(4, 4) T_world_camera of a browser's camera."""
@@ -693,17 +564,3 @@ def _camera_pose(camera: viser.CameraHandle) -> np.ndarray:
     T[:3, :3] = vtf.SO3(np.asarray(camera.wxyz)).as_matrix()
     T[:3, 3] = camera.position
     return T
-
-
-def _pipe_kind(kind: str, radii_mm: list[float]) -> str:
-    """``"15 vertical r10-11 mm"``: the pipes of one kind and their radii."""
-    lo, hi = round(min(radii_mm)), round(max(radii_mm))
-    return f"{len(radii_mm)} {kind} r{lo}{'' if lo == hi else f'-{hi}'} mm"
-
-
-def _mesh_node(run_id: int, *, ghost: bool = False) -> str:
-    """The scene node of a run's mesh (``MESH_NODES/run_NNN``, named as its file and its GLB
-    node) or of the ghost of its previous mesh (``MESH_NODES/ghost_NNN``)."""
-    if ghost:
-        return f"{MESH_NODES}/ghost_{run_id:03d}"
-    return f"{MESH_NODES}/{run_file_stem(run_id)}"

@@ -7,9 +7,11 @@
 
 import * as api from "./api.js";
 import { int, pct, plural, toast } from "./api.js";
+import { closeZoom, initCamera, renderCamera, toggleCamera, toggleZoom, zoomOpen } from "./camera.js";
 import { initRoute, loadRoute, stepRun } from "./route.js";
 
-const SELECTION_POLL_MS = 700;
+// A click in the 3D view changes the selection on the server: the page shows it within this.
+const SELECTION_POLL_MS = 200;
 const JOB_POLL_MS = 500;
 const QUEUE_LIMIT = 10;
 const RUN_QUEUE_LIMIT = 200; // a run's doubtful segments, all of them in practice
@@ -23,6 +25,7 @@ const state = {
   lassoPoints: 0, // points a lasso in the 3D view took (g and o then label those points)
   detail: null, // GET /api/segments/{selection[0]}
   queue: [],
+  queueTotals: null, // {asked, reviewed, done} of the queue's scope
   queueRun: null, // a run_id: the queue reviews that run along the road ("review this run")
   // Bumped on every selection change made by this page: a poll that started
   // before it may carry the old selection and must be dropped.
@@ -31,8 +34,8 @@ const state = {
   pollBusy: false,
   job: null, // {id, result} of the last fine-tuning job
   lastRefresh: 0,
-  showCamera: true, // the camera image with the labels on it (key i)
   labelsVersion: 0, // bumped after every change: the camera image's colours follow the labels
+  autoAdvance: localStorage.getItem("guardrail.autoAdvance") !== "false", // g/o then go on
 };
 
 // Actions (label, undo, next, train, activate) run one after the other.
@@ -137,12 +140,20 @@ function renderInfo() {
   const heldOut = (model.metrics && model.metrics.held_out) || {};
   $("model-f1-guardrail").textContent = pct(heldOut.guardrail?.f1);
   $("model-f1-other").textContent = pct(heldOut.other?.f1);
+  $("model-measured-on").textContent = heldOut.n_held_out
+    ? `Measured when it was trained, ${measuredOn(heldOut, "its training drives")}.`
+    : "";
 
-  const counts = info.label_counts || {};
-  const parts = Object.entries(counts).map(([k, v]) => `${k} ${typeof v === "number" ? int(v) : v}`);
-  $("label-counts").textContent = parts.length
-    ? `${parts.join(" · ")} — of ${int(info.n_segments)} segments`
-    : `${int(info.n_segments)} segments, ${int(info.n_points)} points`;
+  $("label-counts").textContent = labelCountsText(info);
+}
+
+/** The operators' labels in words: "888 points labelled (621 guardrail) in 15 actions". */
+function labelCountsText(info) {
+  const c = info.label_counts || {};
+  const of = `of ${int(info.n_segments)} segments, ${int(info.n_points)} points`;
+  if (!c.labelled_points) return `no labels yet, ${of}`;
+  return `${int(c.labelled_points)} points labelled (${int(c.guardrail_points)} guardrail)`
+    + (c.batches !== undefined ? ` in ${plural(c.batches, "action")}` : "") + `, ${of}`;
 }
 
 // ---- selection ----------------------------------------------------------
@@ -235,6 +246,7 @@ function renderDetail() {
     : "";
   $("selection-empty").hidden = n > 0;
   $("selection-detail").hidden = n === 0;
+  renderBar();
   if (n === 0) return;
 
   $("selected-id").textContent = d ? String(d.id) : String(state.selection[0]);
@@ -254,7 +266,7 @@ function renderDetail() {
     missing.hidden = false;
   }
 
-  renderCamera(d);
+  renderCamera(d, state.labelsVersion);
 
   setLabelChip($("selected-label"), d.label);
   $("selected-reviewed").textContent = d.reviewed ? "✓ reviewed" : "not yet";
@@ -281,41 +293,6 @@ function renderDetail() {
   renderHistory(d.history || []);
 }
 
-/** The segment's camera image with every point on it coloured by label (key i hides it). */
-function renderCamera(d) {
-  const figure = $("camera-figure");
-  const img = $("camera-overlay");
-  const show = state.showCamera && d.image_id !== null && d.image_id !== undefined;
-  figure.hidden = !show;
-  if (!show) return;
-  const url = `/api/images/${d.image_id}/overlay${api.query({ segment: d.id, v: state.labelsVersion })}`;
-  const src = api.imageUrl(url);
-  if (img.getAttribute("src") !== src) {
-    img.dataset.loaded = "false";
-    img.src = src;
-  }
-  img.dataset.image = String(d.image_id);
-}
-
-/** A click on the camera image selects the segment of the point there. */
-async function pickOnCamera(event) {
-  const img = $("camera-overlay");
-  if (!img.naturalWidth || !img.clientWidth) return;
-  const x = (event.offsetX * img.naturalWidth) / img.clientWidth;
-  const y = (event.offsetY * img.naturalHeight) / img.clientHeight;
-  const res = await api.get(`/api/images/${img.dataset.image}/pick${api.query({ x, y })}`);
-  if (res.segment === null) {
-    toast("no segment there: click on a point");
-    return;
-  }
-  await selectSegments([res.segment]);
-}
-
-function toggleCamera() {
-  state.showCamera = !state.showCamera;
-  if (state.detail) renderCamera(state.detail); // without a selection there is no image
-}
-
 function renderHistory(history) {
   const list = $("history");
   list.replaceChildren();
@@ -333,7 +310,7 @@ function renderHistory(history) {
     const who = h.who ? ` ${h.who}` : "";
     const what = h.old === h.new ? `${h.new}` : `${h.old ?? "—"} → ${h.new ?? "—"}`;
     const extra = [h.kind, h.n_points !== undefined && h.n_points !== null ? `${int(h.n_points)} pts` : null,
-      h.model_version ? `model ${h.model_version}` : null, h.batch !== undefined ? `batch ${h.batch}` : null]
+      h.model_version ? `model ${h.model_version}` : null, h.batch !== undefined ? `action ${h.batch}` : null]
       .filter(Boolean).join(", ");
     li.textContent = `${api.formatTime(h.at)}${who}: ${what}${extra ? ` (${extra})` : ""}${h.undone ? " — undone" : ""}`;
     list.append(li);
@@ -348,6 +325,7 @@ async function loadQueue() {
   const res = await api.get(`/api/queue${api.query(params)}`);
   if (run !== state.queueRun) return; // the scope changed meanwhile
   state.queue = (res && res.items) || [];
+  state.queueTotals = res ? { asked: res.asked, reviewed: res.reviewed, done: res.done } : null;
   renderQueue();
 }
 
@@ -362,12 +340,18 @@ function renderQueue() {
   const list = $("queue");
   list.replaceChildren();
   const run = state.queueRun;
-  $("queue-scope").textContent = run === null ? "" : `· run ${run}, along the road`;
+  $("queue-scope").textContent = run === null ? "" : `· guardrail run ${run}, along the road`;
   $("queue-whole").hidden = run === null;
   $("queue-empty").textContent = run === null
-    ? "Nothing left to review."
-    : `Nothing doubtful left on run ${run}.`;
+    ? "Review done: nothing left to ask."
+    : `Guardrail run ${run} is done: nothing left to ask there.`;
   $("queue-empty").hidden = state.queue.length > 0;
+  const totals = state.queueTotals;
+  $("queue-summary").textContent = totals
+    ? `${int(totals.asked)} asked · ${int(totals.reviewed)} reviewed`
+      + (state.queue.length < totals.asked ? ` · the first ${state.queue.length} shown` : "")
+    : "";
+  renderBar();
   for (const item of state.queue) {
     const li = document.createElement("li");
     li.dataset.id = String(item.id);
@@ -412,17 +396,47 @@ function onQueueClick(event) {
   run(() => selectSegments([id]));
 }
 
+/** The action bar's line: what is selected, and where it stands in the queue. */
+function renderBar() {
+  const n = state.selection.length;
+  const d = state.detail;
+  let text = "nothing selected";
+  if (state.lassoPoints) text = `lasso: ${plural(state.lassoPoints, "point")}`;
+  else if (n > 1) text = `${n} segments selected`;
+  else if (n === 1) {
+    text = `#${state.selection[0]}`;
+    if (d && d.id === state.selection[0]) {
+      text += ` · ${d.label}${d.reviewed ? " ✓" : ""} · ${pct(d.probability, 0)}`;
+    }
+  }
+  $("bar-selection").textContent = text;
+  const position = $("queue-position");
+  const totals = state.queueTotals;
+  const done = Boolean(totals && totals.done);
+  position.dataset.done = String(done);
+  if (!totals) {
+    position.textContent = "";
+  } else if (done) {
+    position.textContent = state.queueRun === null ? "✓ review done" : "✓ this run is done";
+  } else {
+    const at = state.queue.findIndex((q) => state.selection.includes(q.id));
+    position.textContent = at < 0
+      ? `${int(totals.asked)} asked`
+      : `${at + 1} of ${int(totals.asked)} asked`;
+  }
+}
+
 async function nextInQueue() {
   if (!state.queue.length) await loadQueue();
   if (!state.queue.length) {
-    toast("nothing left in the review queue");
+    toast("Review done: nothing left to ask");
     return;
   }
   const current = state.selection[0];
   const at = state.queue.findIndex((q) => q.id === current);
   const item = at < 0 ? state.queue[0] : state.queue[at + 1];
   if (!item) {
-    toast("end of the review queue: label this one, the queue refills");
+    toast("the last one the queue asks about: label it");
     return;
   }
   await selectSegments([item.id]);
@@ -443,11 +457,33 @@ async function labelSelection(label, expand) {
     await afterChange();
     return;
   }
+  const before = state.queue.map((q) => q.id);
   const res = await api.post("/api/labels/batch", { segments: ids, label, expand });
-  const n = (res.segments || []).length;
-  const scope = expand === "component" ? " (whole run)" : "";
-  toast(`${plural(n, "segment")} -> ${label}${scope} (${int(res.changed_points)} points)`);
-  await afterChange();
+  const labelled = (res.segments || []).map((x) => x.id);
+  const scope = expand === "component" ? " (whole piece)" : "";
+  toast(`${plural(labelled.length, "segment")} → ${label}${scope} (${int(res.changed_points)} points)`);
+  if (!state.autoAdvance) {
+    await afterChange();
+    return;
+  }
+  // One key per decision: on to the one that followed in the queue, if it is still asked.
+  state.labelsVersion += 1;
+  await loadQueue();
+  const refreshed = Promise.all([loadInfo(), loadRoute()]);
+  const asked = new Set(state.queue.map((q) => q.id));
+  const at = before.indexOf(ids[0]);
+  const following = before.slice(at + 1).concat(before.slice(0, Math.max(at, 0)));
+  const next = following.find((id) => asked.has(id) && !labelled.includes(id))
+    ?? state.queue.find((q) => !labelled.includes(q.id))?.id;
+  if (next === undefined) {
+    await loadDetail();
+    toast(state.queueRun === null
+      ? "Review done: nothing left to ask"
+      : `Guardrail run ${state.queueRun} is done: nothing left to ask there`);
+  } else {
+    await selectSegments([next]);
+  }
+  await refreshed;
 }
 
 async function undo() {
@@ -456,7 +492,7 @@ async function undo() {
     toast("nothing to undo");
     return;
   }
-  toast(`undid batch ${res.undone_batch}: ${plural((res.segments || []).length, "segment")} (${int(res.changed_points)} points)`);
+  toast(`undone: the labels of ${plural((res.segments || []).length, "segment")} (${int(res.changed_points)} points) are back`);
   await afterChange();
 }
 
@@ -543,6 +579,16 @@ const COMPARE_ROWS = [
 
 const isNum = (x) => typeof x === "number" && Number.isFinite(x);
 
+/** On which held-out segments, and against which labels, figures `m` were measured. */
+function measuredOn(m, where) {
+  const against = m.against === "operator labels"
+    ? "against the operators' labels"
+    : m.against
+      ? `against the operators' labels where reviewed (${int(m.n_reviewed_held_out)}), else the current model's corrected labels, which favours the current model`
+      : "against their labels";
+  return `on ${int(m.n_held_out)} held-out segments of ${where}, ${against}`;
+}
+
 function showComparison(result) {
   state.job.result = result;
   const box = $("compare");
@@ -550,6 +596,9 @@ function showComparison(result) {
     $("train-message").textContent = "done, but no new model came back";
     return;
   }
+  $("compare-caption").textContent = result.metrics_new
+    ? `Both models ${measuredOn(result.metrics_new, "this run folder")} (not used to train).`
+    : "Nothing could be held out to compare the models on.";
   $("compare-new-version").textContent = result.version;
   $("compare-current-version").textContent = state.info?.model?.version ?? "";
   const body = box.querySelector("tbody");
@@ -574,6 +623,18 @@ function showComparison(result) {
     }
     body.append(tr);
   }
+  // Activation is the suggested action only when the new model is not worse on these segments.
+  const fNew = result.metrics_new?.guardrail?.f1;
+  const fNow = result.metrics_current?.guardrail?.f1;
+  const worse = isNum(fNew) && isNum(fNow) && fNew < fNow - 0.0005;
+  $("activate").classList.toggle("btn-primary", !worse);
+  $("keep").classList.toggle("btn-primary", worse);
+  $("compare-advice").dataset.worse = String(worse);
+  $("compare-advice").textContent = worse
+    ? `The new model finds guardrails worse here (${((fNew - fNow) * 100).toFixed(1)} pt guardrail F1): keep the current one, or label more and fine-tune again.`
+    : isNum(fNew) && isNum(fNow)
+      ? "The new model is not worse here: activate it to re-predict the run folder."
+      : "No held-out figures to compare: activate it only if you trust the labels it learnt from.";
   $("activate").disabled = false;
   box.hidden = false;
   box.scrollIntoView({ block: "nearest" });
@@ -600,6 +661,17 @@ function keepCurrent() {
   toast(`kept model ${state.info?.model?.version ?? ""}`);
 }
 
+/** Cancel a lasso: one being drawn in the 3D view, and the points one took. */
+async function cancelLasso() {
+  const sel = await api.post("/api/lasso/cancel");
+  const had = state.lassoPoints;
+  state.lassoPoints = (sel && sel.lasso_points) || 0;
+  if (had) {
+    toast("lasso cancelled");
+    renderDetail();
+  }
+}
+
 // ---- help overlay, focus hint, keyboard ---------------------------------
 
 function setHelp(open) {
@@ -610,7 +682,12 @@ function setHelp(open) {
 function onKeyDown(event) {
   if (event.ctrlKey || event.metaKey || event.altKey || api.isTyping(event)) return;
   if (event.key === "Escape") {
+    if (zoomOpen()) {
+      closeZoom();
+      return;
+    }
     setHelp(false);
+    run(cancelLasso);
     return;
   }
   if (event.key === "?") {
@@ -634,7 +711,10 @@ function onKeyDown(event) {
       run(nextInQueue);
       break;
     case "i":
-      toggleCamera();
+      toggleCamera(state.detail, state.labelsVersion);
+      break;
+    case "v":
+      toggleZoom();
       break;
     case "[":
       run(() => stepRun(-1));
@@ -684,10 +764,7 @@ async function init() {
   });
   setFocusHint(!document.hasFocus());
 
-  $("camera-overlay").addEventListener("click", (e) => run(() => pickOnCamera(e)));
-  $("camera-overlay").addEventListener("load", (e) => {
-    e.target.dataset.loaded = "true";
-  });
+  initCamera(selectSegments, run);
   $("help-button").addEventListener("click", () => setHelp(true));
   $("help-close").addEventListener("click", () => setHelp(false));
   $("help").addEventListener("click", (e) => {
@@ -699,6 +776,12 @@ async function init() {
       run(() => labelSelection(button.dataset.label, button.dataset.expand)));
   }
   $("undo").addEventListener("click", () => run(undo));
+  const advance = $("auto-advance");
+  advance.checked = state.autoAdvance;
+  advance.addEventListener("change", () => {
+    state.autoAdvance = advance.checked;
+    localStorage.setItem("guardrail.autoAdvance", String(advance.checked));
+  });
   $("next").addEventListener("click", () => run(nextInQueue));
   $("queue").addEventListener("click", onQueueClick);
   $("queue").addEventListener("keydown", (e) => {
@@ -720,6 +803,8 @@ async function init() {
       return; // nothing else will work either
     }
   }
+  // A lasso left open by the page before a reload would take the next clicks as corners.
+  await api.post("/api/lasso/cancel").catch((err) => toast(`lasso: ${err.message}`, "error"));
   const queueLoaded = loadQueue().catch((err) => toast(`queue: ${err.message}`, "error"));
   const routeLoaded = loadRoute().catch((err) => toast(`route: ${err.message}`, "error"));
   resumeTraining().catch(() => {}); // a training started before a reload goes on showing

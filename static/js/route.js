@@ -59,7 +59,7 @@ export async function flyTo(runId) {
     return;
   }
   await route.select([run.segment]);
-  toast(`run ${runId}: segment ${run.segment} (${run.reviewed} of ${plural(run.segments, "segment")} reviewed)`);
+  toast(`guardrail run ${runId}: ${reviewText(run)}`);
 }
 
 /** Fly to the run before (-1) or after (+1) the current one along the drive. */
@@ -78,15 +78,34 @@ export async function stepRun(direction) {
   await flyTo(runs[next].run_id);
 }
 
+// The progress scale (style.css's .progress-scale draws the same stops): grey, amber, green.
+const SCALE = [[0x9a, 0xa3, 0xad], [0xe8, 0xa3, 0x3d], [0x1d, 0x8a, 0x45]];
+
+/** The colour of a run `share` (0..1) reviewed, as `rgb(r, g, b)`. */
+export function progressColour(share) {
+  const t = Math.max(0, Math.min(1, share)) * (SCALE.length - 1);
+  const k = Math.min(SCALE.length - 2, Math.floor(t));
+  const f = t - k;
+  const mix = SCALE[k].map((a, i) => Math.round(a + (SCALE[k + 1][i] - a) * f));
+  return `rgb(${mix.join(", ")})`;
+}
+
+function reviewText(run) {
+  const asked = run.reviewed + run.asked;
+  if (!run.asked) return `done, ${plural(run.reviewed, "segment")} reviewed`;
+  return `${run.reviewed} of ${plural(asked, "segment")} asked reviewed`
+    + (run.changed ? `, ${run.changed} changed` : "");
+}
+
 function renderRoute() {
   const overview = route.overview;
   if (!overview) return;
   renderMap(overview);
   renderTable(overview);
   const runs = overview.runs;
-  const done = runs.filter((r) => r.state !== "unreviewed").length;
+  const done = runs.filter((r) => r.state === "done").length;
   $("route-summary").textContent = `${(overview.length_m / 1000).toFixed(2)} km · `
-    + `${runs.length} runs, ${done} reviewed`
+    + `${plural(runs.length, "guardrail run")}, ${done} done`
     + (overview.segments_off_runs ? ` · ${int(overview.segments_off_runs)} segments off runs` : "");
 }
 
@@ -111,11 +130,12 @@ function renderMap(overview) {
   svg.append(line(overview.trajectory, "route-trajectory"));
   for (const run of overview.runs) {
     const path = run.path.length > 1 ? run.path : [run.path[0], run.path[0]];
-    const el = line(path, `route-run state-${run.state}`
-      + (run.run_id === route.current ? " current" : ""));
+    const el = line(path, `route-run${run.run_id === route.current ? " current" : ""}`);
     el.dataset.run = String(run.run_id);
+    el.dataset.progress = String(run.progress);
+    el.style.stroke = progressColour(run.progress);
     const title = document.createElementNS(SVG, "title");
-    title.textContent = `run ${run.run_id}: ${run.type}, ${run.reviewed} of ${plural(run.segments, "segment")} reviewed`;
+    title.textContent = `guardrail run ${run.run_id}: ${run.type}, ${reviewText(run)}`;
     el.append(title);
     svg.append(el);
   }
@@ -131,7 +151,6 @@ function renderTable(overview) {
     tr.tabIndex = 0;
     tr.title = run.signature ? `${run.signature}; fly to it` : "fly to it";
     tr.classList.toggle("current", run.run_id === route.current);
-    const share = run.segments ? run.reviewed / run.segments : 0;
     const cells = [
       String(run.run_id),
       run.type,
@@ -146,10 +165,12 @@ function renderTable(overview) {
     }
     const status = document.createElement("td");
     const bar = document.createElement("span");
-    bar.className = `route-progress state-${run.state}`;
-    bar.style.setProperty("--share", String(share));
-    bar.title = `${run.reviewed} of ${plural(run.segments, "segment")} reviewed, ${run.changed} changed`;
-    status.append(bar, document.createTextNode(` ${run.reviewed}/${run.segments}`));
+    bar.className = "route-progress";
+    bar.style.setProperty("--share", String(run.progress));
+    bar.style.setProperty("--colour", progressColour(run.progress));
+    status.title = reviewText(run);
+    status.append(bar, document.createTextNode(
+      run.asked ? ` ${run.reviewed}/${run.reviewed + run.asked}` : " done"));
     tr.append(status);
     body.append(tr);
   }

@@ -16,6 +16,7 @@ slowly); no step ever lasts them when things work.
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 import shutil
@@ -167,32 +168,36 @@ def test_review_app_in_the_browser(
             expect(scene).not_to_contain_text(button)
         expect(scene).to_contain_text("label it on the page")
 
-        # Relabel with the keyboard. The keys must reach the page, not the 3D iframe (whose
-        # viser panel has no labelling).
+        # Relabel with the keyboard: one key labels and goes on to the segment that followed in
+        # the queue. The keys must reach the page, not the 3D iframe (whose viser panel has no
+        # labelling).
         page.locator("#selected-id").click()
         assert page.evaluate("document.activeElement.id") != "scene"
         done = int(body.get_attribute("data-actions") or 0)
+        before = [x["id"] for x in _get(f"{server.url}/api/queue?limit=10")["items"]]
         with page.expect_response(_api("POST", "/api/labels/batch")) as answer:
             page.keyboard.press(key)
         assert answer.value.ok, answer.value.text()
         assert [(x["id"], x["label"]) for x in answer.value.json()["segments"]] == [(s, flipped)]
-        # The action is over once the page has loaded the segment again and shown it.
+        # The action is over once the page has selected the next one and shown it.
         expect(body).to_have_attribute("data-actions", str(done + 1), timeout=WAIT_MS)
-        expect(page.locator("#selected-label")).to_have_attribute("data-label", flipped)
-        expect(page.locator("#selected-reviewed")).to_have_attribute(
-            "data-reviewed", "true", timeout=WAIT_MS
-        )
+        after = [x["id"] for x in _get(f"{server.url}/api/queue?limit=10")["items"]]
+        expect(page.locator("#selected-id")).to_have_text(str(_next_asked(before, after, s)))
         row = _get(f"{server.url}/api/segments/{s}")
         assert row["label"] == flipped and row["reviewed"] is True
         assert row["history"][0]["who"] == "browser-test"
-        # The 3D view has the new colours: the scene's panel text, sent after them, says so.
+        # Back to it: the 3D view has the new colours, as the scene's panel text, sent after
+        # them, says. A reload starts the page afresh.
+        page.goto(f"{server.url}/?segment={s}")
+        expect(body).to_have_attribute("data-state", "ready", timeout=WAIT_MS)
+        expect(page.locator("#selected-label")).to_have_attribute("data-label", flipped)
+        expect(page.locator("#selected-reviewed")).to_have_attribute("data-reviewed", "true")
         expect(scene).to_contain_text(f"label {flipped} (reviewed)", timeout=WAIT_MS)
         page.screenshot(path=shots / "review.png")
 
         # The camera image with the labels on it: a click on another segment's point there
         # selects that segment; i hides the image and shows it again.
         image = _get(f"{server.url}/api/segments/{s}")["image_id"]
-        target, (x, y) = _point_to_click(drive_path, run_path, image, s)
         camera = page.locator("#camera-overlay")
         expect(camera).to_have_attribute(
             "src", re.compile(rf"/api/images/{image}/overlay\?segment={s}&")
@@ -202,6 +207,9 @@ def test_review_app_in_the_browser(
             "() => { const i = document.getElementById('camera-overlay');"
             " return [i.naturalWidth, i.naturalHeight, i.clientWidth, i.clientHeight]; }"
         )
+        # A click counts within 8 screen pixels of a point (static/js/camera.js).
+        radius = math.ceil(8 * natural_w / shown_w)
+        target, (x, y) = _point_to_click(drive_path, run_path, image, s, radius)
         done = int(body.get_attribute("data-actions") or 0)
         with page.expect_response(_api("GET", f"/api/images/{image}/pick")) as answer:
             camera.click(
@@ -223,17 +231,20 @@ def test_review_app_in_the_browser(
         page.keyboard.press("i")
         expect(page.locator("#camera-figure")).to_be_visible()
 
-        # The route overview lists the runs in order along the drive, coloured by review state
-        # (the run of the segment relabelled above is "changed"), and flies to one: a click on
-        # a row selects that run's segment to look at, which the 3D scene follows; [ goes back.
+        # The route overview lists the runs in order along the drive, coloured by the share of
+        # what the queue asks about each that is reviewed, and flies to one: a click on a row
+        # selects that run's segment to look at, which the 3D scene follows; [ goes back.
         runs = _get(f"{server.url}/api/overview")["runs"]
-        assert len(runs) >= 2 and any(r["state"] == "changed" for r in runs)
+        assert len(runs) >= 2
         rows = page.locator("#route-table tbody tr")
         expect(rows).to_have_count(len(runs))
+        lines = page.locator("#route-map polyline.route-run")
+        expect(lines).to_have_count(len(runs))
         for k, run in enumerate(runs):
             expect(rows.nth(k)).to_have_attribute("data-run", str(run["run_id"]))
             expect(rows.nth(k)).to_have_attribute("data-state", run["state"])
-        expect(page.locator("#route-map polyline.route-run")).to_have_count(len(runs))
+            expect(lines.nth(k)).to_have_attribute("data-progress", _js_number(run["progress"]))
+            expect(lines.nth(k)).to_have_css("stroke", _progress_colour(run["progress"]))
         for k, key in ((1, None), (0, "[")):
             done = int(body.get_attribute("data-actions") or 0)
             with page.expect_response(_api("PUT", "/api/selection")) as answer:
@@ -259,6 +270,11 @@ def test_review_app_in_the_browser(
         for k, item in enumerate(along):
             expect(items.nth(k)).to_have_attribute("data-id", str(item["id"]))
         page.locator("#route-panel").screenshot(path=shots / "route.png")
+        # The way back to the whole drive's queue is a button its text fits in.
+        whole_button = page.locator("#queue-whole")
+        expect(whole_button).to_be_visible()
+        assert whole_button.evaluate("b => b.scrollWidth <= b.clientWidth")
+        assert whole_button.evaluate("b => b.scrollHeight <= b.clientHeight")
         page.locator("#selected-id").click()
         page.keyboard.press("w")
         expect(page.locator("#queue-panel")).to_have_attribute("data-run", "")
@@ -339,6 +355,22 @@ def test_review_app_in_the_browser(
             **before,
             "batches": before["batches"] + 2,
         }
+        # A lasso being drawn does not outlive a reload of the page (the next clicks would
+        # silently become its corners), and Escape on the page cancels one.
+        lasso_start = frame.get_by_role("button", name="Lasso points")
+        lasso_close = frame.get_by_role("button", name="Close the lasso")
+        for cancel in ("reload", "Escape"):
+            lasso_start.click()
+            canvas.click(position={"x": 0.1 * box["width"], "y": 0.3 * box["height"]})
+            expect(lasso_close).to_be_visible()
+            if cancel == "reload":
+                page.reload()
+                expect(body).to_have_attribute("data-state", "ready", timeout=WAIT_MS)
+            else:
+                page.locator("#selected-id").click()
+                page.keyboard.press("Escape")
+            expect(lasso_close).to_be_hidden(timeout=WAIT_MS)
+            expect(lasso_start).to_be_visible()
 
         # A crash of the server loses no label: kill it, start it again, reload.
         server.kill()
@@ -382,6 +414,108 @@ def test_review_app_in_the_browser(
         expect(first).to_have_attribute("data-reviewed", "false")
         assert _get(f"{server.url}/api/segments/{first_id}")["reviewed"] is False
         page.screenshot(path=shots / "gallery.png")
+        browser.close()
+    assert not errors, errors
+
+
+#: The action bar's controls, which must stay in view and in place.
+BAR_CONTROLS = (
+    "#label-guardrail",
+    "#label-other",
+    "#label-run-guardrail",
+    "#label-run-other",
+    "#undo",
+    "#next",
+    "#auto-advance",
+)
+#: Its lines of text, whose width changes with what they say.
+BAR_TEXTS = ("#bar-selection", "#queue-position")
+
+
+def _bar_boxes(page) -> dict[str, dict]:  # type: ignore[no-untyped-def]
+    """Where each action bar control is on the screen (CSS pixels), and the top and height of
+    its lines of text."""
+    boxes = {name: page.locator(name).bounding_box() for name in BAR_CONTROLS}
+    for name in BAR_TEXTS:
+        box = page.locator(name).bounding_box()
+        boxes[name] = box and {k: box[k] for k in ("y", "height")}
+    return boxes
+
+
+@pytest.mark.parametrize("width, height", [(1280, 720), (1920, 1080)])
+def test_an_operator_reviews_to_done_with_one_key_per_decision(
+    server: Server, shots: Path, width: int, height: int
+) -> None:
+    """At 1280x720 and 1920x1080 the action bar is in view and stays in place while the
+    details load; each key labels the selection and goes on to the next segment the queue
+    asks about, until the page says the review is done; the route map's colours follow the
+    share reviewed."""
+    from playwright.sync_api import expect, sync_playwright
+
+    assert CHROMIUM.is_file(), "browser tests need Debian's chromium (make test installs it)"
+    url = server.url
+    asked = _get(f"{url}/api/queue?limit=500")
+    assert 0 < asked["asked"] <= 40, "the test street's queue is short enough to finish"
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        page = browser.new_page(viewport={"width": width, "height": height})
+        page.set_default_timeout(WAIT_MS)
+        errors: list[str] = []
+        page.on("pageerror", lambda exc: errors.append(str(exc)))
+        body = page.locator("body")
+        page.goto(url)
+        expect(body).to_have_attribute("data-state", "ready", timeout=WAIT_MS)
+        boxes = _bar_boxes(page)
+        for name, box in boxes.items():
+            assert box is not None, name
+            assert box["y"] >= 0 and box["y"] + box["height"] <= height, (name, box)
+            if "x" in box:
+                assert box["x"] >= 0 and box["x"] + box["width"] <= width, (name, box)
+        position = page.locator("#queue-position")
+        expect(position).to_have_text(f"{asked['asked']} asked")
+
+        # n: the first segment asked; its crop, camera image and history load below the bar.
+        page.locator("#bar-selection").click()
+        done = int(body.get_attribute("data-actions") or 0)
+        page.keyboard.press("n")
+        expect(body).to_have_attribute("data-actions", str(done + 1), timeout=WAIT_MS)
+        first = asked["items"][0]["id"]
+        expect(page.locator("#selected-id")).to_have_text(str(first))
+        if _get(f"{url}/api/segments/{first}")["image_id"] is not None:
+            expect(page.locator("#camera-overlay")).to_have_attribute("data-loaded", "true")
+        expect(position).to_have_text(f"1 of {asked['asked']} asked")
+        assert _bar_boxes(page) == boxes, "the action bar moved while the details loaded"
+        page.screenshot(path=shots / f"bar-{width}x{height}.png")
+
+        # One key per decision, the truth's label, until the queue has nothing left to ask.
+        keys = 0
+        labelled: list[int] = []
+        while position.get_attribute("data-done") != "true":
+            current = int(page.locator("#selected-id").inner_text())
+            row = _get(f"{url}/api/segments/{current}")
+            assert not row["reviewed"], "the page went on to a segment not reviewed yet"
+            key = "g" if (row["truth"] or row["model_label"]) == "guardrail" else "o"
+            done = int(body.get_attribute("data-actions") or 0)
+            page.keyboard.press(key)
+            keys += 1
+            expect(body).to_have_attribute("data-actions", str(done + 1), timeout=WAIT_MS)
+            labelled.append(current)
+            assert _get(f"{url}/api/segments/{current}")["reviewed"] is True
+            assert _bar_boxes(page) == boxes, "the action bar moved"
+            assert keys <= asked["asked"], "more keys than segments asked"
+        queue = _get(f"{url}/api/queue?limit=10")
+        assert queue["done"] and queue["asked"] == 0
+        assert keys == len(set(labelled)) == queue["reviewed"]
+        expect(position).to_have_text("✓ review done")
+        expect(page.locator("#queue-empty")).to_be_visible()
+        # Every run is done, and the map says so in its colours.
+        runs = _get(f"{url}/api/overview")["runs"]
+        lines = page.locator("#route-map polyline.route-run")
+        expect(lines).to_have_count(len(runs))
+        for k, run in enumerate(runs):
+            assert run["state"] == "done" and run["progress"] == 1
+            expect(lines.nth(k)).to_have_css("stroke", _progress_colour(1.0))
+        page.screenshot(path=shots / f"done-{width}x{height}.png")
         browser.close()
     assert not errors, errors
 
@@ -459,6 +593,34 @@ def _fine_tune_and_activate(page, shot: Path) -> tuple[str, str]:  # type: ignor
     return job, active
 
 
+def _next_asked(before: list[int], after: list[int], labelled: int) -> int:
+    """The segment the page goes on to after labelling ``labelled``: the first that followed
+    it in the queue it had (``before``, wrapping round) and that the queue still asks about
+    (``after``), else the first of ``after``."""
+    at = before.index(labelled) if labelled in before else -1
+    following = before[at + 1 :] + before[: max(at, 0)]
+    return next((s for s in following if s in after and s != labelled), after[0])
+
+
+#: The stops of the route map's progress scale (static/js/route.js): grey, amber, green.
+_SCALE = ((0x9A, 0xA3, 0xAD), (0xE8, 0xA3, 0x3D), (0x1D, 0x8A, 0x45))
+
+
+def _progress_colour(share: float) -> str:
+    """The CSS colour the route map gives a run ``share`` reviewed."""
+    t = min(1.0, max(0.0, share)) * (len(_SCALE) - 1)
+    k = min(len(_SCALE) - 2, int(t))
+    f = t - k
+    # Math.round: halves go up.
+    mix = [math.floor(a + (b - a) * f + 0.5) for a, b in zip(_SCALE[k], _SCALE[k + 1], strict=True)]
+    return f"rgb({mix[0]}, {mix[1]}, {mix[2]})"
+
+
+def _js_number(x: float) -> str:
+    """``String(x)`` in JavaScript for a number the API sent as JSON."""
+    return str(int(x)) if float(x).is_integer() else repr(float(x))
+
+
 def _send(method: str, url: str, body: dict) -> dict:
     request = urllib.request.Request(
         url,
@@ -472,7 +634,7 @@ def _send(method: str, url: str, body: dict) -> dict:
 
 
 def _point_to_click(
-    drive_path: Path, run_path: Path, image: int, not_segment: int
+    drive_path: Path, run_path: Path, image: int, not_segment: int, radius: int
 ) -> tuple[int, tuple[int, int]]:
     """A segment other than ``not_segment`` on camera image ``image`` and the pixel of its point
     nearest the camera, where no other segment's point lies within the pick radius, and at
@@ -481,7 +643,7 @@ def _point_to_click(
     image asked for (1024, 768)."""
     import numpy as np
 
-    from app.image_overlay import PICK_RADIUS_PX, ImageOverlay
+    from app.image_overlay import ImageOverlay
     from app.run_tiles import RunTiles
     from guardrail_core.extract.crops import CropParams
     from guardrail_core.formats.drive import open_drive
@@ -502,7 +664,7 @@ def _point_to_click(
         pixel = found.pixel[mine[np.argmin(found.depth[mine])]]
         if not (edge <= pixel[0] < camera.width - edge and edge <= pixel[1] < camera.height - edge):
             continue
-        near = ((found.pixel - pixel) ** 2).sum(axis=1) <= (PICK_RADIUS_PX + 3) ** 2
+        near = ((found.pixel - pixel) ** 2).sum(axis=1) <= (radius + 3) ** 2
         if not (near & (found.segment != t) & (found.segment >= 0)).any():
             return int(t), (int(pixel[0]), int(pixel[1]))
     raise AssertionError(f"no segment stands clear on image {image}")
