@@ -134,7 +134,7 @@ def shoot(url: str, segment: int) -> None:
         folder = scene.locator(".mantine-Paper-root").filter(has_text="Apply to the whole drive")
         folder.last.screenshot(path=IMAGES / "app_tuning.png")
 
-        # A lasso around points in the 3D view (left of the floating panel), closed: the points
+        # A lasso around points in the 3D view (the panel stands beside it), closed: the points
         # taken turn magenta and the page says what g and o will label.
         scene.get_by_role("button", name="Lasso points").click()
         canvas = scene.locator("canvas[data-engine]")
@@ -144,7 +144,7 @@ def shoot(url: str, segment: int) -> None:
             canvas.click(position={"x": fx * box["width"], "y": fy * box["height"]})
         scene.get_by_role("button", name="Close the lasso").click()
         page.wait_for_selector("#lasso-line:not([hidden])", timeout=30_000)
-        page.evaluate("document.querySelector('.side-panel').scrollTop = 0")
+        page.evaluate("document.querySelector('.side-scroll').scrollTop = 0")
         time.sleep(4)  # software WebGL redraws the new colours slowly
         page.screenshot(path=IMAGES / "app_lasso.png")
 

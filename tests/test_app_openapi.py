@@ -39,6 +39,9 @@ FIELDS_THE_PAGES_READ: dict[tuple[str, str], list[str]] = {
         "model.mode",
         "model.metrics.held_out.guardrail.f1",
         "model.metrics.held_out.other.f1",
+        "model.metrics.held_out.n_held_out",
+        "model.metrics.held_out.n_reviewed_held_out",
+        "model.metrics.held_out.against",
     ],
     ("get", "/api/segments"): [
         "total",
@@ -81,6 +84,9 @@ FIELDS_THE_PAGES_READ: dict[tuple[str, str], list[str]] = {
         "items[].label",
         "items[].probability",
         "items[].reason",
+        "asked",
+        "reviewed",
+        "done",
     ],
     ("get", "/api/selection"): ["segments", "lasso_points"],
     ("post", "/api/labels/lasso"): ["changed_points"],
@@ -101,6 +107,8 @@ FIELDS_THE_PAGES_READ: dict[tuple[str, str], list[str]] = {
         "result.metrics_new.other.f1",
         "result.metrics_new.accuracy",
         "result.metrics_new.n_held_out",
+        "result.metrics_new.n_reviewed_held_out",
+        "result.metrics_new.against",
         "result.metrics_current.guardrail.f1",
     ],
     ("post", "/api/models/{version}/activate"): ["active", "changed_segments"],
@@ -117,9 +125,12 @@ FIELDS_THE_PAGES_READ: dict[tuple[str, str], list[str]] = {
         "runs[].segments",
         "runs[].reviewed",
         "runs[].changed",
+        "runs[].asked",
+        "runs[].progress",
         "runs[].state",
         "runs[].segment",
     ],
+    ("post", "/api/lasso/cancel"): ["lasso_points"],
 }
 
 #: Models of figures read from stored model folders, which keep fields they do not name.

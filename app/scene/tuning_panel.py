@@ -92,7 +92,12 @@ class TuningPanel:
                 ),
                 title="x histogram (vertical pipes)",
                 scales={"x": {"time": False}},  # metres, not a time axis
-                aspect=2.0,
+                # Named axes with room for their numbers and labels: the y label was clipped.
+                axes=(
+                    {"label": "x along the unit (m)", "size": 44},
+                    {"label": "points per bin", "size": 56},
+                ),
+                aspect=1.3,
             )
             self._section = gui.add_uplot(
                 data=(np.zeros(2), np.zeros(2)),
@@ -102,7 +107,8 @@ class TuningPanel:
                 ),
                 title="beam section (depth by height)",
                 scales={"x": {"time": False}},
-                aspect=2.0,
+                axes=({"label": "height y (m)", "size": 44}, {"label": "depth z (m)", "size": 56}),
+                aspect=1.3,
                 visible=False,
             )
             self._tune_text = gui.add_markdown("")
@@ -173,6 +179,9 @@ class TuningPanel:
         except (GuardrailError, ValueError) as exc:
             self._tune_text.content = f"**Not re-run:** {exc}"
             return None
+        # The plot first: it answers the slider; the meshes, heavier to send, follow.
+        self.last_tune_seconds = result.seconds
+        self._plot_unit(unit_numbers(run_id, result.unit, params), result.seconds)
         name = mesh_node(run_id)
         previous = self._meshes.pop(run_id, None)
         ghost = self._shown_mesh.get(run_id)
@@ -198,8 +207,6 @@ class TuningPanel:
             visible=self.layers["meshes"],
         )
         self._shown_mesh[run_id] = mesh
-        self.last_tune_seconds = result.seconds
-        self._plot_unit(unit_numbers(run_id, result.unit, params), result.seconds)
         return result.seconds
 
     def _on_run_chosen(self) -> None:

@@ -466,22 +466,32 @@ async function labelSelection(label, expand) {
     await afterChange();
     return;
   }
-  // One key per decision: on to the one that followed in the queue, if it is still asked.
+  // One key per decision: on to the one that followed in the queue, selected before the queue
+  // reloads (a round trip saved); should the queue no longer ask about it (a run just
+  // checked), the first it asks about is selected instead.
   state.labelsVersion += 1;
-  await loadQueue();
-  const refreshed = Promise.all([loadInfo(), loadRoute()]);
-  const asked = new Set(state.queue.map((q) => q.id));
   const at = before.indexOf(ids[0]);
   const following = before.slice(at + 1).concat(before.slice(0, Math.max(at, 0)));
-  const next = following.find((id) => asked.has(id) && !labelled.includes(id))
-    ?? state.queue.find((q) => !labelled.includes(q.id))?.id;
+  const guess = following.find((id) => !labelled.includes(id));
+  // The next one's facts first: the server answers one request at a time in effect.
+  if (guess !== undefined) await selectSegments([guess]);
+  const refreshed = Promise.all([loadInfo(), loadRoute()]);
+  await loadQueue();
+  const asked = new Set(state.queue.map((q) => q.id));
+  const next = guess !== undefined && asked.has(guess)
+    ? guess
+    : following.find((id) => asked.has(id) && !labelled.includes(id))
+      ?? state.queue.find((q) => !labelled.includes(q.id))?.id;
   if (next === undefined) {
-    await loadDetail();
+    if (guess !== undefined) await selectSegments([...ids]); // nothing left: back to it
+    else await loadDetail();
     toast(state.queueRun === null
       ? "Review done: nothing left to ask"
       : `Guardrail run ${state.queueRun} is done: nothing left to ask there`);
-  } else {
+  } else if (next !== guess) {
     await selectSegments([next]);
+  } else {
+    renderBar(); // its place in the reloaded queue
   }
   await refreshed;
 }

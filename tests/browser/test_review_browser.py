@@ -203,27 +203,48 @@ def test_review_app_in_the_browser(
             "src", re.compile(rf"/api/images/{image}/overlay\?segment={s}&")
         )
         expect(camera).to_have_attribute("data-loaded", "true")
-        natural_w, natural_h, shown_w, shown_h = page.evaluate(
-            "() => { const i = document.getElementById('camera-overlay');"
-            " return [i.naturalWidth, i.naturalHeight, i.clientWidth, i.clientHeight]; }"
-        )
-        # A click counts within 8 screen pixels of a point (static/js/camera.js).
-        radius = math.ceil(8 * natural_w / shown_w)
+        # v enlarges it; the wheel zooms about the pointer (the image pixel under it stays).
+        page.locator("#selected-id").click()
+        page.keyboard.press("v")
+        zoomed = page.locator("#zoom-image")
+        expect(page.locator("#camera-zoom")).to_be_visible()
+        expect(zoomed).to_have_attribute("src", re.compile(rf"segment={s}&"))
+        view = page.locator("#zoom-view")
+        expect(view).to_have_attribute("data-scale", "1.000")
+        box = _box(zoomed)
+        natural_w, natural_h = zoomed.evaluate("i => [i.naturalWidth, i.naturalHeight]")
+        at = (box["x"] + 0.4 * box["width"], box["y"] + 0.6 * box["height"])
+        page.mouse.move(*at)
+        page.mouse.wheel(0, -100)
+        expect(view).to_have_attribute("data-scale", "1.250")
+        zoom_box = _box(zoomed)
+        assert zoom_box["width"] == pytest.approx(1.25 * box["width"], rel=1e-3)
+        for k in (0, 1):  # the pointer's image pixel: 40 % across, 60 % down, as before
+            share = (at[k] - zoom_box["xy"[k]]) / zoom_box[("width", "height")[k]]
+            assert share == pytest.approx((0.4, 0.6)[k], abs=1e-3)
+        # A click picks the point within 8 screen pixels at this zoom (static/js/camera.js).
+        radius = math.ceil(8 * natural_w / zoom_box["width"])
         target, (x, y) = _point_to_click(drive_path, run_path, image, s, radius)
         done = int(body.get_attribute("data-actions") or 0)
+        click = (
+            zoom_box["x"] + (x + 0.5) * zoom_box["width"] / natural_w,
+            zoom_box["y"] + (y + 0.5) * zoom_box["height"] / natural_h,
+        )
+        view_box = _box(view)
+        assert view_box["x"] <= click[0] <= view_box["x"] + view_box["width"], "off the view"
+        assert view_box["y"] <= click[1] <= view_box["y"] + view_box["height"], "off the view"
         with page.expect_response(_api("GET", f"/api/images/{image}/pick")) as answer:
-            camera.click(
-                position={
-                    "x": (x + 0.5) * shown_w / natural_w,
-                    "y": (y + 0.5) * shown_h / natural_h,
-                }
-            )
+            page.mouse.click(*click)
         assert answer.value.ok and answer.value.json()["segment"] == target, answer.value.text()
         expect(body).to_have_attribute("data-actions", str(done + 1), timeout=WAIT_MS)
         expect(page.locator("#selected-id")).to_have_text(str(target))
         assert _get(f"{server.url}/api/selection")["segments"] == [target]
         expect(camera).to_have_attribute("src", re.compile(rf"segment={target}&"))
         expect(camera).to_have_attribute("data-loaded", "true")
+        expect(zoomed).to_have_attribute("src", re.compile(rf"segment={target}&"))
+        page.screenshot(path=shots / "camera-enlarged.png")
+        page.keyboard.press("Escape")
+        expect(page.locator("#camera-zoom")).to_be_hidden()
         page.screenshot(path=shots / "camera.png")
         page.locator("#selected-id").click()
         page.keyboard.press("i")
@@ -306,7 +327,8 @@ def test_review_app_in_the_browser(
         threshold, factor = tuned.search(scene.inner_text()).groups()  # type: ignore[union-attr]
         histogram = _get(f"{server.url}/api/runs/{run_id}/histogram?histogram_factor={factor}")
         assert f"{histogram['threshold']:.1f}" == threshold
-        slider = frame.get_by_role("slider").first  # the threshold's factor, 0.1 a step
+        # The threshold's factor (1-6, 0.1 a step): the View folder's point size slider is 1-15.
+        slider = frame.locator('[role="slider"][aria-valuemax="6"]')
         expect(slider).to_have_attribute("aria-valuenow", factor)
         slider.press("ArrowRight")
         moved = f"{float(factor) + 0.1:.1f}"
@@ -324,7 +346,7 @@ def test_review_app_in_the_browser(
         canvas = frame.locator("canvas[data-engine]")  # three.js's, not viser's helpers'
         box = canvas.bounding_box()
         assert box is not None
-        # Left of the floating GUI panel (the right third of the scene).
+        # Corners on the 3D view (the GUI panel stands beside it, fixed).
         for fx, fy in ((0.08, 0.3), (0.55, 0.3), (0.55, 0.9), (0.3, 0.6), (0.08, 0.9)):
             canvas.click(position={"x": fx * box["width"], "y": fy * box["height"]})
         frame.get_by_role("button", name="Close the lasso").click()
@@ -583,6 +605,19 @@ def _fine_tune_and_activate(page, shot: Path) -> tuple[str, str]:  # type: ignor
     job = answer.value.json()["job"]
     expect(page.locator("#activate")).to_be_visible(timeout=JOB_MS)
     expect(page.locator("#compare-table")).to_contain_text("guardrail", timeout=WAIT_MS)
+    # One measure per name: the caption says on what both were measured, and Activate is the
+    # suggested button only when the new model is not worse there.
+    origin = urlsplit(page.url)
+    result = _get(f"{origin.scheme}://{origin.netloc}/api/jobs/{job}")["result"]
+    held = result["metrics_new"]
+    if held is not None:
+        expect(page.locator("#compare-caption")).to_contain_text(
+            f"on {held['n_held_out']:,} held-out segments of this run folder"
+        )
+        worse = held["guardrail"]["f1"] < result["metrics_current"]["guardrail"]["f1"] - 0.0005
+        suggested, other = ("#keep", "#activate") if worse else ("#activate", "#keep")
+        expect(page.locator(suggested)).to_have_class(re.compile(r"\bbtn-primary\b"))
+        expect(page.locator(other)).not_to_have_class(re.compile(r"\bbtn-primary\b"))
     page.screenshot(path=shot)
     done = int(body.get_attribute("data-actions") or 0)
     with page.expect_response(_api("POST", "/api/models/*/activate"), timeout=JOB_MS) as answer:
@@ -591,6 +626,13 @@ def _fine_tune_and_activate(page, shot: Path) -> tuple[str, str]:  # type: ignor
     active = answer.value.json()["active"]
     expect(body).to_have_attribute("data-actions", str(done + 1), timeout=WAIT_MS)
     return job, active
+
+
+def _box(locator) -> dict[str, float]:  # type: ignore[no-untyped-def]
+    """Where an element is drawn on the page (CSS pixels, its transform included)."""
+    box = locator.bounding_box()
+    assert box is not None
+    return box
 
 
 def _next_asked(before: list[int], after: list[int], labelled: int) -> int:
@@ -637,7 +679,8 @@ def _point_to_click(
     drive_path: Path, run_path: Path, image: int, not_segment: int, radius: int
 ) -> tuple[int, tuple[int, int]]:
     """A segment other than ``not_segment`` on camera image ``image`` and the pixel of its point
-    nearest the camera, where no other segment's point lies within the pick radius, and at
+    nearest the camera, where no other segment's point nearer the camera lies within the pick
+    ``radius`` (image pixels), and at
     least ``edge`` pixels inside the image: the page shows the image scaled, its bottom right
     corner under the selection panel, and a click meant for pixel (1022, 766) of a 1024 x 768
     image asked for (1024, 768)."""
@@ -661,11 +704,15 @@ def _point_to_click(
         if t == not_segment:
             continue
         mine = np.flatnonzero(found.segment == t)
-        pixel = found.pixel[mine[np.argmin(found.depth[mine])]]
+        first = mine[np.argmin(found.depth[mine])]
+        pixel = found.pixel[first]
         if not (edge <= pixel[0] < camera.width - edge and edge <= pixel[1] < camera.height - edge):
             continue
+        # The pick takes the point nearest the camera within the radius: none of another
+        # segment may lie there nearer the camera than this one.
         near = ((found.pixel - pixel) ** 2).sum(axis=1) <= (radius + 3) ** 2
-        if not (near & (found.segment != t) & (found.segment >= 0)).any():
+        nearer = found.depth <= found.depth[first]
+        if not (near & nearer & (found.segment != t) & (found.segment >= 0)).any():
             return int(t), (int(pixel[0]), int(pixel[1]))
     raise AssertionError(f"no segment stands clear on image {image}")
 
