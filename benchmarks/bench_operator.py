@@ -57,7 +57,7 @@ CHROMIUM_ARGS = [
     "--disable-component-update",
     "--no-first-run",
 ]
-VIEWPORT = {"width": 1280, "height": 720}
+VIEWPORT = {"width": 1280, "height": 720}  # the page is opened at this size
 TARGET_NEXT_S = 0.3
 TARGET_CLICK_S = 0.5
 TARGET_SLIDER_S = 0.5
@@ -127,7 +127,9 @@ def bench_labels(page, url: str, labels: int) -> dict[str, Any]:  # type: ignore
     done = actions(page)
     page.keyboard.press("n")
     wait_actions(page, done + 1)
-    keys, labelled, seconds = 0, set(), []
+    keys = 0
+    labelled: set[int] = set()
+    seconds: list[float] = []
     while len(labelled) < labels:
         if page.locator("#queue-position").get_attribute("data-done") == "true":
             break
@@ -158,7 +160,8 @@ def bench_clicks(page, repeats: int) -> dict[str, Any]:  # type: ignore[no-untyp
     """3: a click on the scene's canvas until the page shows the segment picked."""
     canvas = page.frame_locator("#scene").locator("canvas[data-engine]")
     box = canvas.bounding_box()
-    seconds, tries = [], 0
+    seconds: list[float] = []
+    tries = 0
     # Points around the middle of the view, where the selection was flown to.
     spots = [(0.5 + dx, 0.5 + dy) for dy in (-0.2, 0.0, 0.2) for dx in (-0.3, -0.15, 0.15, 0.3)]
     for fx, fy in spots * 3:
@@ -208,7 +211,7 @@ def measure(url: str, labels: int, repeats: int, scene: bool) -> dict[str, Any]:
 
     with sync_playwright() as p:
         browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        page = browser.new_page(viewport=VIEWPORT)
+        page = browser.new_page(viewport={"width": 1280, "height": 720})
         if not scene:
             scene_url = get(f"{url}/api/info")["scene_url"]
             page.route(f"{scene_url}/**", lambda r: r.fulfill(body="", content_type="text/html"))
