@@ -107,6 +107,21 @@ def test_a_click_on_a_point_picks_its_segment(
     assert field[row, col] > PICK_RADIUS_PX + 1
     empty = module_client.get(f"/api/images/{image}/pick", params={"x": col, "y": row}).json()
     assert empty == {"image": image, "segment": None}
+    # The page sends a radius worth 8 screen pixels at the scale it shows the image: a wider
+    # radius reaches the nearest point from there, the default does not.
+    exact = cv2.distanceTransform(free, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    row, col = np.argwhere((exact > 15) & (exact < 40))[0]
+    gap = float(exact[row, col])  # pixels to the nearest segment point
+    wide = {"x": int(col), "y": int(row), "radius": gap + 1}
+    assert module_client.get(f"/api/images/{image}/pick", params=wide).json()["segment"] is not None
+    narrow = {"x": int(col), "y": int(row), "radius": gap - 1}
+    assert module_client.get(f"/api/images/{image}/pick", params=narrow).json()["segment"] is None
+    assert (
+        module_client.get(
+            f"/api/images/{image}/pick", params={"x": col, "y": row, "radius": 0}
+        ).status_code
+        == 422
+    )
 
 
 def test_bad_images_segments_and_pixels_are_refused(

@@ -47,10 +47,14 @@ def test_train_from_the_shipped_model_then_activate(
     assert client.get("/api/info").json()["model"]["version"] == shipped.version
     before = load_run(session.run.root).segments["probability"].copy()
 
-    # An operator labels the first 30 segments of the queue as they are.
+    # An operator labels 30 segments as they are: what the queue asks (the shipped model is sure
+    # of most of this street), then the most uncertain others, as the gallery sorts them.
     assert drive.truth is not None
     truth = segment_truth(drive.truth.point_class, session.run.point_segment, len(session.run))
     queue = [row["id"] for row in client.get("/api/queue", params={"limit": 30}).json()["items"]]
+    doubtful = client.get("/api/segments", params={"sort": "uncertainty", "limit": 60}).json()
+    queue += [row["id"] for row in doubtful["items"] if row["id"] not in queue]
+    queue = queue[:30]
     assert len(queue) == 30
     for s in queue:
         label = "guardrail" if truth[s] else "other"

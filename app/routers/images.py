@@ -64,5 +64,10 @@ def pick(
     i = _image(session, image_id)
     width, height = session.overlay.size(i)
     if not (np.isfinite(x) and np.isfinite(y) and x < width and y < height):
-        raise HTTPException(422, detail=f"({x}, {y}) lies outside the {width} x {height} px image")
+        # In the shape of FastAPI's own validation errors, as the schema says a 422 is.
+        where = "x" if not (np.isfinite(x) and x < width) else "y"
+        message = f"({x}, {y}) lies outside the {width} x {height} px image"
+        raise HTTPException(
+            422, detail=[{"loc": ["query", where], "msg": message, "type": "value_error"}]
+        )
     return {"image": i, "segment": session.overlay.pick(i, x, y, radius)}

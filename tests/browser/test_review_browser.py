@@ -509,25 +509,38 @@ def test_an_operator_reviews_to_done_with_one_key_per_decision(
         assert _bar_boxes(page) == boxes, "the action bar moved while the details loaded"
         page.screenshot(path=shots / f"bar-{width}x{height}.png")
 
-        # One key per decision, the truth's label, until the queue has nothing left to ask.
-        keys = 0
-        labelled: list[int] = []
-        while position.get_attribute("data-done") != "true":
-            current = int(page.locator("#selected-id").inner_text())
-            row = _get(f"{url}/api/segments/{current}")
-            assert not row["reviewed"], "the page went on to a segment not reviewed yet"
-            key = "g" if (row["truth"] or row["model_label"]) == "guardrail" else "o"
+        # A guardrail run from the route panel to done: a click on it makes the queue that run's, along
+        # the road; one key per decision, the truth's label, until it asks nothing more there.
+        runs = _get(f"{url}/api/overview")["runs"]
+        run = next(r for r in runs if r["asked"])
+        done = int(body.get_attribute("data-actions") or 0)
+        page.locator(f'#route-table tbody tr[data-run="{run["run_id"]}"]').click()
+        expect(body).to_have_attribute("data-actions", str(done + 1), timeout=WAIT_MS)
+        expect(page.locator("#queue-panel")).to_have_attribute("data-run", str(run["run_id"]))
+        expect(page.locator("#selected-id")).to_have_text(str(run["segment"]))
+        keys, labelled = _label_until_done(page, url, boxes)
+        assert keys <= run["asked"] + 1  # the segment flown to, if the queue did not ask it
+        expect(position).to_have_text("✓ this run is done")
+        after = next(r for r in _get(f"{url}/api/overview")["runs"] if r["run_id"] == run["run_id"])
+        assert after["state"] == "done" and after["progress"] == 1 and after["asked"] == 0
+        line = page.locator(f'#route-map polyline.route-run[data-run="{run["run_id"]}"]')
+        expect(line).to_have_css("stroke", _progress_colour(1.0))
+        # w: the whole drive's queue, to done.
+        page.locator("#bar-selection").click()
+        done = int(body.get_attribute("data-actions") or 0)
+        page.keyboard.press("w")
+        expect(body).to_have_attribute("data-actions", str(done + 1), timeout=WAIT_MS)
+        expect(page.locator("#queue-panel")).to_have_attribute("data-run", "")
+        if position.get_attribute("data-done") != "true":  # n: the first one it asks about
             done = int(body.get_attribute("data-actions") or 0)
-            page.keyboard.press(key)
-            keys += 1
+            page.keyboard.press("n")
             expect(body).to_have_attribute("data-actions", str(done + 1), timeout=WAIT_MS)
-            labelled.append(current)
-            assert _get(f"{url}/api/segments/{current}")["reviewed"] is True
-            assert _bar_boxes(page) == boxes, "the action bar moved"
-            assert keys <= asked["asked"], "more keys than segments asked"
+        more, also = _label_until_done(page, url, boxes)
+        keys, labelled = keys + more, labelled + also
+        assert keys <= asked["asked"] + 1, "more keys than segments asked"
         queue = _get(f"{url}/api/queue?limit=10")
         assert queue["done"] and queue["asked"] == 0
-        assert keys == len(set(labelled)) == queue["reviewed"]
+        assert keys == len(set(labelled)) == queue["reviewed"]  # one key per decision
         expect(position).to_have_text("✓ review done")
         expect(page.locator("#queue-empty")).to_be_visible()
         # Every run is done, and the map says so in its colours.
@@ -626,6 +639,31 @@ def _fine_tune_and_activate(page, shot: Path) -> tuple[str, str]:  # type: ignor
     active = answer.value.json()["active"]
     expect(body).to_have_attribute("data-actions", str(done + 1), timeout=WAIT_MS)
     return job, active
+
+
+def _label_until_done(page, url: str, boxes: dict) -> tuple[int, list[int]]:  # type: ignore[no-untyped-def]
+    """Press the truth's label (else the model's) of the selected segment, one key each, until
+    the queue in view asks nothing more; the action bar stays where ``boxes`` found it. The
+    keys pressed and the segments labelled."""
+    from playwright.sync_api import expect
+
+    body = page.locator("body")
+    position = page.locator("#queue-position")
+    keys, labelled = 0, []
+    while position.get_attribute("data-done") != "true":
+        current = int(page.locator("#selected-id").inner_text())
+        row = _get(f"{url}/api/segments/{current}")
+        assert not row["reviewed"], "the page went on to a segment reviewed already"
+        key = "g" if (row["truth"] or row["model_label"]) == "guardrail" else "o"
+        done = int(body.get_attribute("data-actions") or 0)
+        page.keyboard.press(key)
+        keys += 1
+        expect(body).to_have_attribute("data-actions", str(done + 1), timeout=WAIT_MS)
+        labelled.append(current)
+        assert _get(f"{url}/api/segments/{current}")["reviewed"] is True
+        assert _bar_boxes(page) == boxes, "the action bar moved"
+        assert keys <= 200, "the queue never ended"
+    return keys, labelled
 
 
 def _box(locator) -> dict[str, float]:  # type: ignore[no-untyped-def]
