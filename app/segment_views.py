@@ -7,10 +7,11 @@ from typing import Any
 
 import numpy as np
 
-from app.route_overview import run_places, segment_runs
+from app.route_overview import counted_segments, run_places, segment_runs
 from app.session import ReviewSession
 from guardrail_core.formats.run_folder import CROP_OK, CROP_STATUS_NAMES
 from guardrail_core.review.queue import (
+    MIN_QUEUE_POINTS,
     asked_segments,
     queue_order,
     segment_queue_scores,
@@ -90,7 +91,9 @@ def filter_segments(
     return ids.astype(np.int64)
 
 
-def review_queue(session: ReviewSession, limit: int, run: int | None = None) -> dict[str, Any]:
+def review_queue(
+    session: ReviewSession, limit: int, run: int | None = None, *, off_runs: bool = False
+) -> dict[str, Any]:
     """The segments the review queue asks about, best first, and how far the review is.
 
     The queue asks about an unreviewed segment of ``MIN_QUEUE_POINTS`` points or more whose
@@ -101,7 +104,10 @@ def review_queue(session: ReviewSession, limit: int, run: int | None = None) -> 
     the model's uncertainty (1 at p = 0.5), weighted by the points it moves and by half again
     where it would join or split a guardrail run
     (:func:`guardrail_core.review.queue.segment_queue_scores`). With ``run``, those of that
-    guardrail run in order along the road, as they were scanned.
+    guardrail run in order along the road, as they were scanned. With ``off_runs``, every
+    unreviewed segment of ``MIN_QUEUE_POINTS`` points or more that the model or an operator
+    calls guardrail and that lies on no reconstructed run (a run without poles, a rail beyond
+    its end poles, a mistake), along the road: the route table cannot reach those.
 
     Returns ``items`` (the first ``limit``), ``asked`` (how many the queue holds), ``reviewed``
     (segments an operator labelled, in the same scope) and ``done`` (nothing left to ask).
@@ -118,7 +124,11 @@ def review_queue(session: ReviewSession, limit: int, run: int | None = None) -> 
     unchecked = unchecked_runs(seg["component"], seg["label"], seg["n_points"], reviewed, score)
     score = score + unchecked  # as segment_queue_scores(seg, reviewed)
     asked = asked_segments(seg, reviewed)
-    if run is None:
+    if off_runs:
+        in_scope = counted_segments(session) & (segment_runs(session, run_places(session)) < 0)
+        mine = np.flatnonzero(in_scope & ~reviewed & (seg["n_points"] >= MIN_QUEUE_POINTS))
+        order = mine[np.argsort(seg["time"][mine].mean(axis=1), kind="stable")].astype(np.int64)
+    elif run is None:
         order = queue_order(np.where(asked, score, -np.inf), ~asked)
         in_scope = np.ones(len(asked), bool)
     else:

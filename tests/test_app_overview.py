@@ -179,3 +179,32 @@ def test_a_redone_reconstruction_is_read_again(client: TestClient, session: Revi
     models.write_text(json.dumps(document, indent=2))
     after = client.get("/api/overview").json()["runs"]
     assert [r["run_id"] for r in after] == [r["run_id"] for r in before[1:]]
+
+
+def test_the_guardrail_segments_on_no_run_have_a_queue_along_the_road(
+    client: TestClient, session: ReviewSession
+) -> None:
+    """What the route table cannot reach (a run without poles, a rail beyond its end poles, a
+    mistake): the guardrail segments on no run, unreviewed, along the road."""
+    places = run_places(session)
+    seg = session.run.segments
+    # Take the poles of the first run away: its segments lie on no run now.
+    models_file = session.folder.reconstruction.models_file
+    document = json.loads(models_file.read_text())
+    document["runs"][0]["poles"] = []
+    models_file.write_text(json.dumps(document))
+    places = run_places(session)
+    owner = segment_runs(session, places)
+    counted = seg["label"] | session.effective_label() | (session.operator_label >= 0)
+    expected = np.flatnonzero(counted & (owner < 0) & (seg["n_points"] >= 10))
+    assert len(expected) >= 5, "the first run's segments are off the runs now"
+    queue = client.get("/api/queue?off_runs=true&limit=500").json()
+    ids = [item["id"] for item in queue["items"]]
+    assert sorted(ids) == expected.tolist() and queue["asked"] == len(ids)
+    scanned = seg["time"][ids].mean(axis=1)
+    assert (np.diff(scanned) >= 0).all()  # along the road
+    assert client.get("/api/overview").json()["segments_off_runs"] >= len(ids)
+    client.put(f"/api/segments/{ids[0]}/label", json={"label": "guardrail"})
+    again = client.get("/api/queue?off_runs=true&limit=500").json()
+    assert [item["id"] for item in again["items"]] == ids[1:] and again["reviewed"] == 1
+    assert client.get("/api/queue?off_runs=true&run=0").status_code == 422

@@ -26,7 +26,9 @@ const state = {
   detail: null, // GET /api/segments/{selection[0]}
   queue: [],
   queueTotals: null, // {asked, reviewed, done} of the queue's scope
-  queueRun: null, // a run_id: the queue reviews that run along the road ("review this run")
+  // A run_id: the queue reviews that run along the road ("review this run"); "off": the
+  // guardrail segments on no run, along the road; null: the whole drive's queue.
+  queueRun: null,
   // Bumped on every selection change made by this page: a poll that started
   // before it may carry the old selection and must be dropped.
   selectionSeq: 0,
@@ -321,7 +323,9 @@ function renderHistory(history) {
 
 async function loadQueue() {
   const run = state.queueRun;
-  const params = run === null ? { limit: QUEUE_LIMIT } : { limit: RUN_QUEUE_LIMIT, run };
+  const params = run === null
+    ? { limit: QUEUE_LIMIT }
+    : run === "off" ? { limit: RUN_QUEUE_LIMIT, off_runs: true } : { limit: RUN_QUEUE_LIMIT, run };
   const res = await api.get(`/api/queue${api.query(params)}`);
   if (run !== state.queueRun) return; // the scope changed meanwhile
   state.queue = (res && res.items) || [];
@@ -340,11 +344,14 @@ function renderQueue() {
   const list = $("queue");
   list.replaceChildren();
   const run = state.queueRun;
-  $("queue-scope").textContent = run === null ? "" : `· guardrail run ${run}, along the road`;
+  $("queue-scope").textContent = run === null
+    ? ""
+    : run === "off" ? "· guardrail segments on no run, along the road" : `· guardrail run ${run}, along the road`;
   $("queue-whole").hidden = run === null;
   $("queue-empty").textContent = run === null
     ? "Review done: nothing left to ask."
-    : `Guardrail run ${run} is done: nothing left to ask there.`;
+    : run === "off" ? "No unreviewed guardrail segment lies off the runs."
+      : `Guardrail run ${run} is done: nothing left to ask there.`;
   $("queue-empty").hidden = state.queue.length > 0;
   const totals = state.queueTotals;
   $("queue-summary").textContent = totals
@@ -417,7 +424,9 @@ function renderBar() {
   if (!totals) {
     position.textContent = "";
   } else if (done) {
-    position.textContent = state.queueRun === null ? "✓ review done" : "✓ this run is done";
+    position.textContent = state.queueRun === null
+      ? "✓ review done"
+      : state.queueRun === "off" ? "✓ none left off the runs" : "✓ this run is done";
   } else {
     const at = state.queue.findIndex((q) => state.selection.includes(q.id));
     position.textContent = at < 0
@@ -485,9 +494,7 @@ async function labelSelection(label, expand) {
   if (next === undefined) {
     if (guess !== undefined) await selectSegments([...ids]); // nothing left: back to it
     else await loadDetail();
-    toast(state.queueRun === null
-      ? "Review done: nothing left to ask"
-      : `Guardrail run ${state.queueRun} is done: nothing left to ask there`);
+    toast($("queue-empty").textContent);
   } else if (next !== guess) {
     await selectSegments([next]);
   } else {

@@ -29,6 +29,8 @@ export function initRoute(select, run, review) {
   route.run = run;
   route.review = review;
   $("route-map").addEventListener("click", onClick);
+  // What the table cannot reach: guardrail segments on no reconstructed run.
+  $("off-runs").addEventListener("click", () => route.run(() => route.review("off")));
   $("route-table").addEventListener("click", onClick);
   $("route-table").addEventListener("keydown", (event) => {
     if (event.key === "Enter") onClick(event);
@@ -105,8 +107,10 @@ function renderRoute() {
   const runs = overview.runs;
   const done = runs.filter((r) => r.state === "done").length;
   $("route-summary").textContent = `${(overview.length_m / 1000).toFixed(2)} km · `
-    + `${plural(runs.length, "guardrail run")}, ${done} done`
-    + (overview.segments_off_runs ? ` · ${int(overview.segments_off_runs)} segments off runs` : "");
+    + `${plural(runs.length, "guardrail run")}, ${done} done`;
+  const off = $("off-runs");
+  off.hidden = !overview.segments_off_runs;
+  off.textContent = `${plural(overview.segments_off_runs, "guardrail segment")} on no run ▸`;
 }
 
 function renderMap(overview) {

@@ -291,6 +291,15 @@ def test_review_app_in_the_browser(
         for k, item in enumerate(along):
             expect(items.nth(k)).to_have_attribute("data-id", str(item["id"]))
         page.locator("#route-panel").screenshot(path=shots / "route.png")
+        # The guardrail segments on no run are a queue of their own, reached from the panel.
+        off = _get(f"{server.url}/api/overview")["segments_off_runs"]
+        if off:
+            page.locator("#off-runs").click()
+            expect(page.locator("#queue-panel")).to_have_attribute("data-run", "off")
+            listed = _get(f"{server.url}/api/queue?off_runs=true&limit=200")["items"]
+            expect(items).to_have_count(len(listed))
+        else:
+            expect(page.locator("#off-runs")).to_be_hidden()
         # The way back to the whole drive's queue is a button its text fits in.
         whole_button = page.locator("#queue-whole")
         expect(whole_button).to_be_visible()
@@ -524,7 +533,10 @@ def test_an_operator_reviews_to_done_with_one_key_per_decision(
         after = next(r for r in _get(f"{url}/api/overview")["runs"] if r["run_id"] == run["run_id"])
         assert after["state"] == "done" and after["progress"] == 1 and after["asked"] == 0
         line = page.locator(f'#route-map polyline.route-run[data-run="{run["run_id"]}"]')
-        expect(line).to_have_css("stroke", _progress_colour(1.0))
+        expect(line).to_have_attribute("data-progress", "1")  # drawn blue: the run flown to
+        row = page.locator(f'#route-table tbody tr[data-run="{run["run_id"]}"]')
+        expect(row).to_have_attribute("data-state", "done")
+        expect(row.locator("td").last).to_have_text("done")
         # w: the whole drive's queue, to done.
         page.locator("#bar-selection").click()
         done = int(body.get_attribute("data-actions") or 0)
@@ -549,7 +561,9 @@ def test_an_operator_reviews_to_done_with_one_key_per_decision(
         expect(lines).to_have_count(len(runs))
         for k, run in enumerate(runs):
             assert run["state"] == "done" and run["progress"] == 1
-            expect(lines.nth(k)).to_have_css("stroke", _progress_colour(1.0))
+            expect(lines.nth(k)).to_have_attribute("data-progress", "1")
+            if "current" not in (lines.nth(k).get_attribute("class") or ""):  # blue: flown to
+                expect(lines.nth(k)).to_have_css("stroke", _progress_colour(1.0))
         page.screenshot(path=shots / f"done-{width}x{height}.png")
         browser.close()
     assert not errors, errors
