@@ -198,13 +198,12 @@ def test_the_guardrail_segments_on_no_run_have_a_queue_along_the_road(
     counted = seg["label"] | session.effective_label() | (session.operator_label >= 0)
     expected = np.flatnonzero(counted & (owner < 0) & (seg["n_points"] >= 10))
     assert len(expected) >= 5, "the first run's segments are off the runs now"
-    queue = client.get("/api/queue?off_runs=true&limit=500").json()
+    queue = client.get("/api/queue/off-runs?limit=500").json()
     ids = [item["id"] for item in queue["items"]]
     assert sorted(ids) == expected.tolist() and queue["asked"] == len(ids)
     scanned = seg["time"][ids].mean(axis=1)
     assert (np.diff(scanned) >= 0).all()  # along the road
     assert client.get("/api/overview").json()["segments_off_runs"] >= len(ids)
     client.put(f"/api/segments/{ids[0]}/label", json={"label": "guardrail"})
-    again = client.get("/api/queue?off_runs=true&limit=500").json()
+    again = client.get("/api/queue/off-runs?limit=500").json()
     assert [item["id"] for item in again["items"]] == ids[1:] and again["reviewed"] == 1
-    assert client.get("/api/queue?off_runs=true&run=0").status_code == 422

@@ -33,37 +33,29 @@ def get_queue(
             "road (a run of GET /api/overview)",
         ),
     ] = None,
-    off_runs: Annotated[
-        bool,
-        Query(
-            description="the guardrail segments on no reconstructed run, unreviewed, in order "
-            "along the road (the route table cannot reach them)"
-        ),
-    ] = False,
 ) -> dict[str, Any]:
     """The segments the queue asks about, most worth a look first (disagreement, then
     uncertainty), and how far the review is; with ``run``, that guardrail run's in order along
     the road."""
-    if off_runs and run is not None:
-        raise HTTPException(422, detail=[_both_scopes()])
     try:
-        return review_queue(session, limit, run, off_runs=off_runs)
+        return review_queue(session, limit, run)
     except KeyError as exc:
         raise HTTPException(404, detail=str(exc.args[0])) from exc
-
-
-def _both_scopes() -> dict[str, Any]:
-    """A validation error in FastAPI's shape: ``run`` and ``off_runs`` together."""
-    return {
-        "loc": ["query", "off_runs"],
-        "msg": "give run or off_runs, not both",
-        "type": "value_error",
-    }
 
 
 def _selection(session: ReviewSession) -> dict[str, Any]:
     with session.lock:
         return {"segments": [int(s) for s in session.selection], "lasso_points": len(session.lasso)}
+
+
+@router.get("/queue/off-runs", response_model=Queue)
+def get_queue_off_runs(
+    session: Session, limit: Annotated[int, Query(ge=1, le=500)] = 20
+) -> dict[str, Any]:
+    """The guardrail segments on no reconstructed run (a run without poles, a rail beyond its end
+    poles, a mistake), unreviewed, of 10 points or more, in order along the road: what the route
+    table cannot reach."""
+    return review_queue(session, limit, off_runs=True)
 
 
 @router.get("/selection", response_model=Selection)

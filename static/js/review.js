@@ -323,10 +323,11 @@ function renderHistory(history) {
 
 async function loadQueue() {
   const run = state.queueRun;
+  const path = run === "off" ? "/api/queue/off-runs" : "/api/queue";
   const params = run === null
     ? { limit: QUEUE_LIMIT }
-    : run === "off" ? { limit: RUN_QUEUE_LIMIT, off_runs: true } : { limit: RUN_QUEUE_LIMIT, run };
-  const res = await api.get(`/api/queue${api.query(params)}`);
+    : run === "off" ? { limit: RUN_QUEUE_LIMIT } : { limit: RUN_QUEUE_LIMIT, run };
+  const res = await api.get(`${path}${api.query(params)}`);
   if (run !== state.queueRun) return; // the scope changed meanwhile
   state.queue = (res && res.items) || [];
   state.queueTotals = res ? { asked: res.asked, reviewed: res.reviewed, done: res.done } : null;

@@ -296,7 +296,7 @@ def test_review_app_in_the_browser(
         if off:
             page.locator("#off-runs").click()
             expect(page.locator("#queue-panel")).to_have_attribute("data-run", "off")
-            listed = _get(f"{server.url}/api/queue?off_runs=true&limit=200")["items"]
+            listed = _get(f"{server.url}/api/queue/off-runs?limit=200")["items"]
             expect(items).to_have_count(len(listed))
         else:
             expect(page.locator("#off-runs")).to_be_hidden()
