@@ -223,10 +223,9 @@ def start_review(
         hosts = allowed_hosts_for(host, allowed_hosts)
         scene = guarded_viser_server(host, scene_port or port + 1, allowed_hosts=hosts, token=token)
         undo.callback(scene.stop)
-        # A fixed panel beside the 3D view, not floating over it: nothing covers the selection.
-        scene.gui.configure_theme(
-            control_layout="fixed", control_width="medium", show_share_button=False
-        )
+        scene.gui.configure_theme(control_width="medium", show_share_button=False)
+        # The panel docked beside the 3D view, not floating over it: nothing covers the selection.
+        scene.gui.main_panel.dock_right()
         ReviewScene(session, scene, window_m=window_m, point_budget=point_budget, jobs=jobs)
         # viser takes the next free port when the one asked for is taken: the page embeds, and
         # the operator is shown, the port it listens on.

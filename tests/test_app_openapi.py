@@ -131,6 +131,7 @@ FIELDS_THE_PAGES_READ: dict[tuple[str, str], list[str]] = {
         "runs[].segment",
     ],
     ("post", "/api/lasso/cancel"): ["lasso_points"],
+    ("get", "/api/queue/off-runs"): ["items[].id", "asked", "reviewed", "done"],
 }
 
 #: Models of figures read from stored model folders, which keep fields they do not name.
