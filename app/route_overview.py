@@ -23,7 +23,7 @@ from guardrail_core.formats.drive_tiles import vehicle_station
 from guardrail_core.reconstruct.inventory import inventory_rows
 from guardrail_core.reconstruct.model import RunModel
 from guardrail_core.reconstruct.model_json import run_model_from_json
-from guardrail_core.review.queue import asked_segments, segment_queue_scores
+from guardrail_core.review.queue import asked_segments, segment_queue_scores, unchecked_runs
 from guardrail_core.sensors.trajectory import Trajectory
 
 #: Metres (horizontal): how far from its run's pole line a segment's centroid may lie.
@@ -148,7 +148,8 @@ def route_overview(session: ReviewSession) -> dict:
     reviewed = session.operator_label >= 0
     changed = reviewed & ((session.operator_label == 1) != seg["label"])
     score = segment_queue_scores(seg)
-    asked = asked_segments(seg, reviewed)
+    unchecked = unchecked_runs(seg["component"], seg["label"], seg["n_points"], reviewed, score)
+    asked = asked_segments(seg, reviewed, unchecked=unchecked)
     runs = []
     for k, place in enumerate(places):
         mine = np.flatnonzero(owner == k)

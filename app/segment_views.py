@@ -123,7 +123,7 @@ def review_queue(
     score = segment_queue_scores(seg)  # the change a decision is expected to make
     unchecked = unchecked_runs(seg["component"], seg["label"], seg["n_points"], reviewed, score)
     score = score + unchecked  # as segment_queue_scores(seg, reviewed)
-    asked = asked_segments(seg, reviewed)
+    asked = asked_segments(seg, reviewed, unchecked=unchecked)
     if off_runs:
         in_scope = counted_segments(session) & (segment_runs(session, run_places(session)) < 0)
         mine = np.flatnonzero(in_scope & ~reviewed & (seg["n_points"] >= MIN_QUEUE_POINTS))

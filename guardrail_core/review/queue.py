@@ -157,6 +157,7 @@ def asked_segments(
     segments: Mapping[str, np.ndarray],
     reviewed: np.ndarray,
     *,
+    unchecked: np.ndarray | None = None,
     min_uncertainty: float = ASK_MIN_UNCERTAINTY,
     min_points: int = MIN_QUEUE_POINTS,
 ) -> np.ndarray:
@@ -164,19 +165,20 @@ def asked_segments(
 
     Unreviewed (``reviewed`` (S,) bool False), of ``min_points`` points or more, and one of:
     the correction changed the model's label ("disagrees"), it stands for a guardrail run
-    nobody has looked at (:func:`unchecked_runs`, "unchecked"), or the model's
-    :func:`uncertainty` is at least ``min_uncertainty`` ("uncertain"). When none is left, the
-    review of the run folder is done.
+    nobody has looked at (:func:`unchecked_runs`, "unchecked"; pass ``unchecked`` (S,) bool
+    where the caller has it already), or the model's :func:`uncertainty` is at least
+    ``min_uncertainty`` ("uncertain"). When none is left, the review of the run folder is done.
     """
     reviewed = np.asarray(reviewed, bool)
     disagrees = np.asarray(segments["raw_label"], bool) != np.asarray(segments["label"], bool)
-    unchecked = unchecked_runs(
-        segments["component"],
-        segments["label"],
-        segments["n_points"],
-        reviewed,
-        segment_queue_scores(segments),
-    )
+    if unchecked is None:
+        unchecked = unchecked_runs(
+            segments["component"],
+            segments["label"],
+            segments["n_points"],
+            reviewed,
+            segment_queue_scores(segments),
+        )
     doubtful = uncertainty(segments["probability"]) >= min_uncertainty
     big = np.asarray(segments["n_points"]) >= min_points
     return ~reviewed & big & (disagrees | unchecked | doubtful)
