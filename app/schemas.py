@@ -361,6 +361,10 @@ class Selection(ResponseModel):
         description="the points a lasso in the 3D view took (0: whole segments are selected); "
         "POST /api/labels/lasso labels them"
     )
+    version: int = Field(
+        description="counts the changes of the selection: GET /api/selection?after=VERSION "
+        "answers when it moves"
+    )
 
 
 # -- jobs and models ----------------------------------------------------------------------------

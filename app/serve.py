@@ -51,6 +51,8 @@ def new_token() -> str:
 #: receives the window's points (about 15 bytes each), so both are bounded.
 WINDOW_RANGE_M = (1.0, 1000.0)
 POINT_BUDGET_RANGE = (1000, 2_000_000)
+#: Seconds Ctrl+C waits for requests in flight (a long poll of the selection among them).
+SHUTDOWN_S = 2
 
 
 def check_scene_options(window_m: float, point_budget: int) -> None:
@@ -147,7 +149,14 @@ class ReviewServers:
 
     def run(self) -> None:
         """Serve the app on its socket until interrupted (Ctrl+C ends it quietly)."""
-        config = uvicorn.Config(self.app, host=self.host, port=self.port, log_level="warning")
+        config = uvicorn.Config(
+            self.app,
+            host=self.host,
+            port=self.port,
+            log_level="warning",
+            # A page's long poll of the selection may wait 20 s: Ctrl+C need not.
+            timeout_graceful_shutdown=SHUTDOWN_S,
+        )
         server = uvicorn.Server(config)
         try:
             server.run(sockets=[self.app_socket])

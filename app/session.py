@@ -24,6 +24,7 @@ import numpy as np
 from app.image_overlay import ImageOverlay
 from app.model_registry import ModelRegistry
 from app.run_tiles import RunTiles
+from app.version_watch import VersionWatch
 from guardrail_core.errors import InvalidOptionError
 from guardrail_core.extract.classifier_params import ClassifierParams
 from guardrail_core.formats.drive import DriveSource, open_drive
@@ -107,6 +108,8 @@ class ReviewSession:
         self.operator_label[segments] = label
         self.selection = np.zeros(0, np.int64)
         self.lasso = np.zeros(0, np.int64)  # (L,) drive points of the last lasso, or none
+        # Bumped on every change of the selection or lasso: the page's long poll waits on it.
+        self.selection_watch = VersionWatch()
         self._listeners: list[Listener] = []
 
     # -- state ------------------------------------------------------------------------------
@@ -212,6 +215,7 @@ class ReviewSession:
         with self.lock:
             self.selection = ids
             self.lasso = np.zeros(0, np.int64)
+        self.selection_watch.bump()  # the page first: the 3D view's redraw takes longer
         self.notify("selection", ids)
         return ids
 
@@ -224,6 +228,7 @@ class ReviewSession:
         with self.lock:
             self.lasso = points[segment >= 0]
             self.selection = ids
+        self.selection_watch.bump()
         self.notify("selection", ids)
         return ids
 
@@ -233,6 +238,7 @@ class ReviewSession:
         with self.lock:
             self.lasso = np.zeros(0, np.int64)
             ids = self.selection
+        self.selection_watch.bump()
         self.notify("lasso_cancelled", ids)
         return ids
 

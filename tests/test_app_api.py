@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import shutil
+import threading
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -222,13 +224,45 @@ def test_the_queue_has_an_end(client: TestClient, session: ReviewSession) -> Non
 
 
 def test_selection_round_trip(client: TestClient, session: ReviewSession) -> None:
-    both = {"segments": [1, 3], "lasso_points": 0}
+    version = client.get("/api/selection").json()["version"]
+    both = {"segments": [1, 3], "lasso_points": 0, "version": version + 1}
     assert client.put("/api/selection", json={"segments": [3, 1, 3]}).json() == both
     assert client.get("/api/selection").json() == both
     heard = []
     session.subscribe(lambda event, ids: heard.append((event, list(ids))))
     client.put("/api/selection", json={"segments": [2]})
     assert heard == [("selection", [2])]
+
+
+def test_the_selection_s_long_poll_answers_when_the_3d_view_changes_it(
+    client: TestClient, session: ReviewSession
+) -> None:
+    """GET /api/selection?after=N waits while the version is N and answers as soon as a click
+    in the 3D view (session.select, from another thread) moves it."""
+    version = client.get("/api/selection").json()["version"]
+    # A version the page has not seen is answered at once.
+    stale = client.get("/api/selection", params={"after": version + 7, "wait_s": 25}).json()
+    assert stale["version"] == version
+    answers: list[dict] = []
+    poll = threading.Thread(
+        target=lambda: answers.append(
+            client.get("/api/selection", params={"after": version, "wait_s": 25}).json()
+        )
+    )
+    poll.start()
+    deadline = time.monotonic() + 20
+    while not session.selection_watch._waiters and time.monotonic() < deadline:
+        time.sleep(0.005)  # until the request waits (state, not time, decides)
+    assert session.selection_watch._waiters, "the long poll never waited"
+    session.select([4])
+    poll.join(timeout=20)  # far less than its 25 s: the change woke it
+    assert not poll.is_alive()
+    assert answers == [{"segments": [4], "lasso_points": 0, "version": version + 1}]
+    assert not session.selection_watch._waiters
+    # Nothing changes: the poll ends after wait_s with the same version.
+    quiet = client.get("/api/selection", params={"after": version + 1, "wait_s": 0.05}).json()
+    assert quiet["version"] == version + 1
+    assert client.get("/api/selection", params={"after": 0, "wait_s": 26}).status_code == 422
 
 
 def test_a_lasso_s_points_are_labelled_alone_and_undone(
@@ -243,10 +277,8 @@ def test_a_lasso_s_points_are_labelled_alone_and_undone(
     road = int(np.flatnonzero(session.folder.point_segment() == -1)[0])
     segments = session.select_points(np.append(half, road))
     assert segments.tolist() == [big, big + 1]
-    assert client.get("/api/selection").json() == {
-        "segments": [big, big + 1],
-        "lasso_points": len(half),
-    }
+    selection = client.get("/api/selection").json()
+    assert selection["segments"] == [big, big + 1] and selection["lasso_points"] == len(half)
     answer = client.post("/api/labels/lasso", json={"label": "other"}).json()
     assert answer["changed_points"] == len(half)
     assert [row["id"] for row in answer["segments"]] == [big, big + 1]

@@ -14,7 +14,16 @@ from fastapi.testclient import TestClient
 from app.jobs import JobRunner
 from app.main import create_app
 from app.route_overview import run_places
-from app.scene.colours import GUARDRAIL, OTHER, SELECTED, point_colours, probability_colours
+from app.scene.colours import (
+    GUARDRAIL,
+    NO_VALUE,
+    OFF_ROAD,
+    OTHER,
+    ROAD,
+    SELECTED,
+    point_colours,
+    probability_colours,
+)
 from app.scene.picking import in_polygon, in_rectangle, pick_along_ray, project_to_screen
 from app.scene.tuning import RunTuner, unit_numbers, with_value
 from app.scene.viewer import ReviewScene
@@ -93,25 +102,21 @@ def test_colours_follow_mode_and_operator_labels() -> None:
         point_class=np.array([6, 6, 15, 1, 16]),
     )
     none = np.full(5, -1, np.int8)
-    unselected = np.zeros(2, bool)
-    label = point_colours("label", point_segment, point_labels=none, selected=unselected, **common)
+    label = point_colours("label", point_segment, point_labels=none, **common)
     assert (label[:2] == GUARDRAIL).all() and (label[2] == OTHER).all()
+    assert (label[3] == ROAD).all() and (label[4] == OFF_ROAD).all()
     own = np.array([-1, 0, -1, -1, -1], np.int8)  # an operator said point 1 is not guardrail
-    mixed = point_colours("label", point_segment, point_labels=own, selected=unselected, **common)
+    mixed = point_colours("label", point_segment, point_labels=own, **common)
     assert (mixed[0] == GUARDRAIL).all() and (mixed[1] == OTHER).all()
-    raw = point_colours(
-        "prediction", point_segment, point_labels=none, selected=unselected, **common
-    )
+    raw = point_colours("prediction", point_segment, point_labels=none, **common)
     assert (raw[:2] == OTHER).all() and (raw[2] == GUARDRAIL).all()
-    truth = point_colours("truth", point_segment, point_labels=none, selected=unselected, **common)
+    truth = point_colours("truth", point_segment, point_labels=none, **common)
     assert (truth[:2] == GUARDRAIL).all() and (truth[2] == OTHER).all()
-    chosen = point_colours(
-        "probability", point_segment, point_labels=none, selected=np.array([False, True]), **common
-    )
-    assert (chosen[2] == SELECTED).all()
-    assert (chosen[0] == probability_colours(np.array([0.9]))[0]).all()
+    probability = point_colours("probability", point_segment, point_labels=none, **common)
+    assert (probability[0] == probability_colours(np.array([0.9]))[0]).all()
+    assert (probability[2] == NO_VALUE).all() and (probability[3] == ROAD).all()
     with pytest.raises(ValueError, match="colour mode"):
-        point_colours("rainbow", point_segment, point_labels=none, selected=unselected, **common)
+        point_colours("rainbow", point_segment, point_labels=none, **common)
 
 
 @pytest.fixture()
@@ -148,7 +153,13 @@ def test_scene_shows_a_window_and_recolours_a_relabelled_segment(
     expected = GUARDRAIL if flipped == "guardrail" else OTHER
     assert (colours[shown == s] == expected).all()
     session.select([s])
-    assert (scene._cloud.colors[shown == s] == SELECTED).all()  # type: ignore[union-attr]
+    # The selection is drawn over the points: its own cloud holds exactly the segment's points
+    # shown, in magenta, and the points keep their label colours.
+    overlay = scene._selection_cloud
+    assert overlay is not None
+    np.testing.assert_array_equal(overlay.points, window.xyz[shown == s].astype(np.float32))
+    assert (overlay.colors == SELECTED).all()
+    assert (scene._cloud.colors[shown == s] == expected).all()  # type: ignore[union-attr]
     assert "Segment" in scene._selection_text.content
 
 
@@ -188,7 +199,7 @@ def test_retuning_a_run_changes_its_model_and_keeps_the_run_folder(
     assert seconds is not None and seconds < 5.0
     assert "ms" in scene._tune_text.content
     chosen = scene._chosen_run()
-    assert chosen is not None and chosen in scene._ghosts  # the previous mesh, ghosted
+    assert chosen is not None and chosen in scene._ghosts  # the reconstruction's, ghosted
     assert chosen in scene._shown_mesh
 
 
@@ -370,9 +381,10 @@ def test_a_lasso_selects_the_points_inside_it_and_the_page_labels_only_those(
     np.testing.assert_array_equal(
         session.selection, np.unique(shown.segment[np.isin(shown.index, expected)])
     )
-    colours = scene._cloud.colors  # type: ignore[union-attr]
     lassoed = np.isin(scene.shown.index, expected)
-    assert (colours[lassoed] == SELECTED).all() and not (colours[~lassoed] == SELECTED).all(1).any()
+    overlay = scene._selection_cloud  # the lasso's points, not their whole segments
+    assert overlay is not None and (overlay.colors == SELECTED).all()
+    np.testing.assert_array_equal(overlay.points, scene.shown.xyz[lassoed].astype(np.float32))
     assert scene._lasso_line is None and "Lasso" in scene._selection_text.content
 
     before = session.store.counts()["labelled_points"]
@@ -413,10 +425,12 @@ def test_the_page_cancels_a_lasso_being_drawn_and_one_taken(
     points = session.tiles.points_of(np.array([segment]))[:5]
     session.select_points(points)
     assert len(session.lasso) == 5
+    version = session.selection_watch.version
     with TestClient(create_app(session)) as api:
         assert api.post("/api/lasso/cancel", json={}).json() == {
             "segments": [segment],
             "lasso_points": 0,
+            "version": version + 1,  # the page's long poll hears of it
         }
     assert len(session.lasso) == 0 and session.selection.tolist() == [segment]
 

@@ -16,6 +16,11 @@ router = APIRouter(prefix="/api", tags=["review"])
 Session = Annotated[ReviewSession, Depends(get_session)]
 
 
+#: The longest a long poll of the selection waits (seconds): below the idle timeouts of
+#: proxies, so that a page behind one keeps its connection.
+MAX_WAIT_S = 25.0
+
+
 class SelectionBody(BaseModel):
     segments: list[SegmentId] = Field(max_length=100_000)
 
@@ -45,7 +50,11 @@ def get_queue(
 
 def _selection(session: ReviewSession) -> dict[str, Any]:
     with session.lock:
-        return {"segments": [int(s) for s in session.selection], "lasso_points": len(session.lasso)}
+        return {
+            "segments": [int(s) for s in session.selection],
+            "lasso_points": len(session.lasso),
+            "version": session.selection_watch.version,
+        }
 
 
 @router.get("/queue/off-runs", response_model=Queue)
@@ -59,9 +68,23 @@ def get_queue_off_runs(
 
 
 @router.get("/selection", response_model=Selection)
-def get_selection(session: Session) -> dict[str, Any]:
+async def get_selection(
+    session: Session,
+    after: Annotated[
+        int | None,
+        Query(
+            ge=0,
+            le=2**53,
+            description="a long poll: answer when the selection's version is no longer this one "
+            "(a click in the 3D view changed it), or after wait_s seconds",
+        ),
+    ] = None,
+    wait_s: Annotated[float, Query(ge=0, le=MAX_WAIT_S)] = 0.0,
+) -> dict[str, Any]:
     """The selected segments and, when a lasso in the 3D view made the selection, how many of
     their points it took."""
+    if after is not None and wait_s > 0:
+        await session.selection_watch.wait_past(after, wait_s)
     return _selection(session)
 
 

@@ -40,7 +40,6 @@ def point_colours(
     probability: np.ndarray,
     point_labels: np.ndarray,
     point_class: np.ndarray | None,
-    selected: np.ndarray,
 ) -> np.ndarray:
     """(K,) points' colours, (K, 3) uint8.
 
@@ -52,7 +51,8 @@ def point_colours(
     raw_label, probability : (S,) the model's raw prediction and probability
     point_labels : (K,) int8, the operator's label of each point, -1 where none
     point_class : (K,) truth class of each point, or None when the drive has no truth
-    selected : (S,) bool, selected segments (drawn magenta in every mode)
+
+    The selection is not coloured here: the scene draws it over the points.
     """
     # Each point gets a code into a small palette, and the palette is indexed once: 400,000
     # points take a few milliseconds, not the 26 ms of assigning RGB rows mask by mask.
@@ -61,25 +61,24 @@ def point_colours(
     s = np.maximum(point_segment, 0)
     base = np.where(point_segment == -1, 1, 0)  # road, else off the road
     if mode == "probability":  # one colour per segment, then per point
-        palette = np.concatenate([[OFF_ROAD, ROAD, SELECTED], probability_colours(probability)])
-        code = np.where(inside, 3 + s, base)
+        palette = np.concatenate([[OFF_ROAD, ROAD], probability_colours(probability)])
+        code = np.where(inside, 2 + s, base)
     else:
-        palette = np.stack([OFF_ROAD, ROAD, SELECTED, GUARDRAIL, OTHER, NO_VALUE])
+        palette = np.stack([OFF_ROAD, ROAD, GUARDRAIL, OTHER, NO_VALUE])
         if mode == "label":
             own = np.asarray(point_labels)
             flag = np.where(own >= 0, own == 1, segment_label[s])  # a point's own label wins
-            code = np.where(inside, np.where(flag, 3, 4), base)
+            code = np.where(inside, np.where(flag, 2, 3), base)
         elif mode == "prediction":
-            code = np.where(inside, np.where(raw_label[s], 3, 4), base)
+            code = np.where(inside, np.where(raw_label[s], 2, 3), base)
         elif mode == "truth":
             if point_class is None:
-                code = np.where(inside, 5, base)
+                code = np.where(inside, 4, base)
             else:  # every point of a guardrail, in a segment or not
                 truth = np.isin(point_class, list(GUARDRAIL_CLASSES))
-                code = np.where(truth, 3, np.where(inside, 4, base))
+                code = np.where(truth, 2, np.where(inside, 3, base))
         else:
             raise ValueError(f"colour mode: expected one of {COLOUR_MODES}, got {mode!r}")
-    code = np.where(inside & selected[s], 2, code)
     return palette[code]
 
 

@@ -3,6 +3,16 @@
 from __future__ import annotations
 
 import numpy as np
+import viser
+import viser.transforms as vtf
+
+
+def camera_pose(camera: viser.CameraHandle) -> np.ndarray:
+    """(4, 4) T_world_camera of a browser's camera."""
+    T = np.eye(4)
+    T[:3, :3] = vtf.SO3(np.asarray(camera.wxyz)).as_matrix()
+    T[:3, 3] = camera.position
+    return T
 
 
 def pick_along_ray(

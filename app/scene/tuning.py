@@ -122,8 +122,13 @@ class RunTuner:
         """
         clock = time.perf_counter()
         unit = self.unit(run_id, params)
-        mesh = run_mesh(dataclasses.replace(self.run(run_id), model=unit.model), params.sweep)
-        return Retuned(unit, mesh, time.perf_counter() - clock)
+        return Retuned(unit, self.mesh(run_id, unit, params), time.perf_counter() - clock)
+
+    def mesh(
+        self, run_id: int, unit: UnitReconstruction, params: ReconstructionParams
+    ) -> trimesh.Trimesh:
+        """The mesh of run ``run_id`` with ``unit``'s model (:meth:`unit`) copied along it."""
+        return run_mesh(dataclasses.replace(self.run(run_id), model=unit.model), params.sweep)
 
     def unit(self, run_id: int, params: ReconstructionParams) -> UnitReconstruction:
         """The unit model of a run re-run with ``params``, and its x histogram (pipes); the

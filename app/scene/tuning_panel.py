@@ -1,7 +1,7 @@
 """The 3D scene's *Reconstruction* panel: choose a guardrail run (the scene flies to it), move
 the sliders of its kind (pipes or beams) and see its unit model re-run with its x histogram or
-beam section, the previous mesh ghosted; *Apply to the whole drive* reconstructs it all in a
-background job and says when it is done.
+beam section, the reconstruction's own mesh ghosted; *Apply to the whole drive* reconstructs it
+all in a background job and says when it is done.
 
 :class:`TuningPanel` is a part of :class:`app.scene.viewer.ReviewScene`: it uses the scene's
 server, session, tuner, jobs and meshes.
@@ -10,6 +10,7 @@ server, session, tuner, jobs and meshes.
 from __future__ import annotations
 
 import threading
+import time
 from typing import Any
 
 import numpy as np
@@ -18,6 +19,7 @@ import viser
 
 from app import review_jobs
 from app.jobs import JobBusyError, JobRunner
+from app.scene.latest_only import LatestOnly
 from app.scene.tuning import TUNABLE, RunTuner, slider_value, unit_numbers, with_value
 from app.session import ReviewSession
 from guardrail_core.errors import GuardrailError
@@ -31,8 +33,6 @@ MESH_COLOUR = (200, 235, 40)
 TUNED_COLOUR = (0, 215, 235)
 GHOST_COLOUR = (150, 150, 150)
 GHOST_OPACITY = 0.3
-#: Seconds to wait after the last slider move before re-running (sliders fire on every step).
-DEBOUNCE_S = 0.15
 #: The scene folder of the reconstructed meshes.
 MESH_NODES = "/reconstruction"
 
@@ -46,7 +46,7 @@ class TuningPanel:
     jobs: JobRunner | None
     vehicle_station: np.ndarray
     _tuner: RunTuner | None
-    _tune_timer: threading.Timer | None
+    _tune_runner: LatestOnly
     _tune_lock: threading.Lock
     _quiet_sliders: bool
     _meshes: dict[int, viser.GlbHandle | viser.MeshHandle]
@@ -147,11 +147,7 @@ class TuningPanel:
     def _schedule_tune(self) -> None:
         if self._quiet_sliders:
             return
-        if self._tune_timer is not None:
-            self._tune_timer.cancel()
-        self._tune_timer = threading.Timer(DEBOUNCE_S, self.retune)
-        self._tune_timer.daemon = True
-        self._tune_timer.start()
+        self._tune_runner.request()
 
     def slider_params(self) -> ReconstructionParams:
         """The reconstruction parameters with the sliders' values."""
@@ -164,8 +160,8 @@ class TuningPanel:
         return params
 
     def retune(self) -> float | None:
-        """Re-run the chosen run's unit model with the sliders' values and show its mesh, the
-        previous one ghosted; returns the seconds the re-run took."""
+        """Re-run the chosen run's unit model with the sliders' values, plot it, and show its
+        mesh beside the reconstruction's own, ghosted; returns the seconds the re-run took."""
         with self._tune_lock:
             return self._retune()
 
@@ -174,22 +170,28 @@ class TuningPanel:
         if self._tuner is None or run_id is None:
             return None
         params = self.slider_params()
+        clock = time.perf_counter()
         try:
-            result = self._tuner.retune(run_id, params)
+            unit = self._tuner.unit(run_id, params)
         except (GuardrailError, ValueError) as exc:
             self._tune_text.content = f"**Not re-run:** {exc}"
             return None
-        # The plot first: it answers the slider; the meshes, heavier to send, follow.
-        self.last_tune_seconds = result.seconds
-        self._plot_unit(unit_numbers(run_id, result.unit, params), result.seconds)
-        name = mesh_node(run_id)
-        previous = self._meshes.pop(run_id, None)
-        ghost = self._shown_mesh.get(run_id)
-        if ghost is None:  # first re-run: the ghost is the reconstruction's own mesh
+        # The plot answers the slider: it goes out at once. The meshes follow; a browser takes
+        # far longer to draw them, and a slider moved meanwhile skips them.
+        seconds = time.perf_counter() - clock
+        self.last_tune_seconds = seconds
+        self._plot_unit(unit_numbers(run_id, unit, params), seconds)
+        self.server.flush()
+        if self._tune_runner.pending:
+            return seconds
+        self._show_tuned_mesh(run_id, self._tuner.mesh(run_id, unit, params))
+        return seconds
+
+    def _show_tuned_mesh(self, run_id: int, mesh: trimesh.Trimesh) -> None:
+        """Show a run's re-run mesh in place of its reconstruction's, which stays as a ghost."""
+        assert self._tuner is not None
+        if run_id not in self._ghosts:  # first re-run of this run: ghost its reconstruction
             ghost = run_mesh(self._tuner.run(run_id), self._tuner.params.sweep)
-        if previous is not None:
-            previous.remove()
-        if ghost is not None:
             self._ghosts[run_id] = self.server.scene.add_mesh_simple(
                 mesh_node(run_id, ghost=True),
                 vertices=ghost.vertices.astype(np.float32),
@@ -198,16 +200,17 @@ class TuningPanel:
                 opacity=GHOST_OPACITY,
                 visible=self.layers["meshes"],
             )
-        mesh: trimesh.Trimesh = result.mesh
+        previous = self._meshes.pop(run_id, None)
+        if previous is not None:
+            previous.remove()
         self._meshes[run_id] = self.server.scene.add_mesh_simple(  # type: ignore[assignment]
-            name,
+            mesh_node(run_id),
             vertices=mesh.vertices.astype(np.float32),
             faces=mesh.faces.astype(np.uint32),
             color=TUNED_COLOUR,
             visible=self.layers["meshes"],
         )
         self._shown_mesh[run_id] = mesh
-        return result.seconds
 
     def _on_run_chosen(self) -> None:
         """Plot the chosen run's histogram (or section) as its model has it, then re-run it

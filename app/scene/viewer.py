@@ -25,7 +25,9 @@ from app.jobs import JobRunner
 from app.route_overview import run_stations
 from app.run_tiles import TilePoints
 from app.scene.colours import COLOUR_MODES, SELECTED, colour_legend, point_colours
-from app.scene.picking import in_polygon, in_rectangle, pick_along_ray, project_to_screen
+from app.scene.lasso_tool import LASSO_HELP, LassoTool
+from app.scene.latest_only import LatestOnly
+from app.scene.picking import camera_pose, in_rectangle, pick_along_ray, project_to_screen
 from app.scene.tuning import RunTuner
 from app.scene.tuning_panel import MESH_COLOUR, TuningPanel, mesh_node
 from app.scene.window import window_points
@@ -35,7 +37,6 @@ from guardrail_core.formats.drive_tiles import vehicle_station
 
 #: The selection panel without a selection: picking is the scene's, labelling the page's.
 NO_SELECTION = "Click a point to select its segment (shift + drag: many); label it on the page."
-#: The lasso being drawn: its node, colour, and how far in front of the camera (metres).
 #: The layers an operator can show or hide, and whether each shows at first: the camera frusta
 #: stand in the foreground, between the road and the rails, and hide the selection.
 LAYERS = {
@@ -45,16 +46,13 @@ LAYERS = {
     "cameras": "Cameras",
 }
 LAYERS_SHOWN = {"points": True, "other": True, "meshes": True, "cameras": False}
-LASSO_NODE = "/lasso"
-LASSO_COLOUR = (255, 0, 220)
-LASSO_DRAW_M = 2.0
-LASSO_HELP = (
-    "**Lasso:** click the corners of a polygon around the points, then *Close the lasso*; "
-    "the page labels the points inside (g, o)."
-)
+#: The selection is drawn over the points, larger so that it shows through them: selecting
+#: sends the few points selected, not new colours for every point shown.
+SELECTION_NODE = "/drive/selection"
+SELECTION_SIZE = 1.6  # times the points' size
 
 
-class ReviewScene(TuningPanel):
+class ReviewScene(TuningPanel, LassoTool):
     """The viser scene and GUI of one review session.
 
     Parameters
@@ -91,6 +89,7 @@ class ReviewScene(TuningPanel):
         self.point_size_m = 0.04
         self._lock = threading.RLock()
         self._cloud: viser.PointCloudHandle | None = None
+        self._selection_cloud: viser.PointCloudHandle | None = None
         self._frusta: list[viser.CameraFrustumHandle] = []
         self._meshes: dict[int, viser.GlbHandle | viser.MeshHandle] = {}
         self._mesh_files: dict[int, Path] = {}  # run id -> its GLB, read when near the window
@@ -100,9 +99,9 @@ class ReviewScene(TuningPanel):
         self._fly_on_select = True
         self._quiet_sliders = False  # set while the code, not an operator, moves the sliders
         self._tuner: RunTuner | None = None
-        self._tune_timer: threading.Timer | None = None
-        # One re-run at a time: a debounced one still running when another starts would
-        # otherwise draw its older sliders' plot over the newer one's.
+        # A slider's re-run starts at once; moves made meanwhile collapse into one more.
+        self._tune_runner = LatestOnly(self.retune)
+        # One re-run at a time: the runner's and a direct call's (tests, the API).
         self._tune_lock = threading.Lock()
         self.last_tune_seconds: float | None = None
         # A lasso being drawn: its corners (screen position, drawn point) and the view.
@@ -136,6 +135,7 @@ class ReviewScene(TuningPanel):
                 )
             )
             self._send_cloud()
+            self._send_selection()
         self._add_cameras()
         self.show_meshes_near()
         self._window_text.content = (
@@ -157,6 +157,33 @@ class ReviewScene(TuningPanel):
             visible=self.layers["points"],
         )
 
+    def _send_selection(self) -> None:
+        """Draw the selection over the points: the points shown (those the layers show) of the
+        selected segments, or of the lasso, in magenta."""
+        session = self.session
+        shown = self.shown
+        if len(session.lasso):  # a lasso selects points, not whole segments
+            chosen = np.isin(shown.index, session.lasso, assume_unique=True)
+        else:
+            chosen = np.isin(shown.segment, session.selection)
+        kept = np.zeros(len(shown), bool)
+        kept[self._kept()] = True
+        xyz = shown.xyz[chosen & kept].astype(np.float32)
+        with self._lock:
+            if self._selection_cloud is not None:
+                self._selection_cloud.remove()
+                self._selection_cloud = None
+            if len(xyz):
+                self._selection_cloud = self.server.scene.add_point_cloud(
+                    SELECTION_NODE,
+                    points=xyz,
+                    colors=np.broadcast_to(SELECTED, xyz.shape).copy(),
+                    point_size=SELECTION_SIZE * self.point_size_m,
+                    point_shape="circle",
+                    precision="float32",
+                    visible=self.layers["points"],
+                )
+
     def _kept(self) -> np.ndarray | slice:
         """The points shown that the layers keep: all, or, with the layer "points labelled
         other" off, those of segments labelled guardrail."""
@@ -167,12 +194,10 @@ class ReviewScene(TuningPanel):
         return (segment >= 0) & label[np.maximum(segment, 0)]
 
     def _colours(self) -> np.ndarray:
+        """(K, 3) uint8 colours of the points shown in the colour mode (the selection is drawn
+        over them: :meth:`_send_selection`)."""
         session = self.session
-        selected = np.zeros(session.n_segments, bool)
-        lasso = session.lasso
-        if len(lasso) == 0:
-            selected[session.selection] = True
-        colours = point_colours(
+        return point_colours(
             self.mode,
             self.shown.segment,
             segment_label=session.effective_label(),
@@ -180,14 +205,10 @@ class ReviewScene(TuningPanel):
             probability=session.run.segments["probability"],
             point_labels=session.labels_at(self.shown.index),
             point_class=self.shown.point_class,
-            selected=selected,
         )
-        if len(lasso):  # a lasso selects points, not whole segments
-            colours[np.isin(self.shown.index, lasso, assume_unique=True)] = SELECTED
-        return colours
 
     def recolour(self) -> float:
-        """Recolour the points shown (after a relabel, a new selection or another mode);
+        """Recolour the points shown (after a relabel, new predictions or another mode);
         returns the seconds it took."""
         clock = time.perf_counter()
         with self._lock:
@@ -306,98 +327,28 @@ class ReviewScene(TuningPanel):
         )
         if hit is None:
             return
-        self.session.select([int(candidates.segment[hit])])
+        self._select_in_view([int(candidates.segment[hit])])
+
+    def _select_in_view(self, segments: np.ndarray | list[int]) -> None:
+        """Select what the operator picked in this view: the camera stays where it is."""
+        self._fly_on_select = False
+        try:
+            self.session.select(segments)
+        finally:
+            self._fly_on_select = True
 
     def _on_rect_select(self, event: viser.SceneRectSelectEvent) -> None:
         camera = event.client.camera
         candidates = self._segment_points()
         uv, in_front = project_to_screen(
-            candidates.xyz, _camera_pose(camera), camera.fov, camera.aspect
+            candidates.xyz, camera_pose(camera), camera.fov, camera.aspect
         )
         inside = in_rectangle(
             uv, in_front, np.asarray(event.screen_min), np.asarray(event.screen_max)
         )
         segments = np.unique(candidates.segment[inside])
         if len(segments):
-            self.session.select(segments)
-
-    # -- the lasso ----------------------------------------------------------------------------
-
-    def start_lasso(self) -> None:
-        """Start a lasso: each click in the scene adds a corner, *Close the lasso* selects the
-        segment points inside it, as the view showed them at the first corner."""
-        with self._lock:
-            self._lasso = []
-            self._lasso_camera = None
-        self._lasso_start.visible = False
-        self._lasso_close.visible = self._lasso_cancel.visible = True
-        self._selection_text.content = LASSO_HELP
-
-    def add_lasso_corner(self, event: viser.SceneClickEvent) -> None:
-        """One corner of the lasso: the click's screen position (the polygon's), drawn a little
-        in front of the camera along the click's ray."""
-        if self._lasso is None or event.screen_pos is None:
-            return
-        camera = event.client.camera
-        with self._lock:
-            if self._lasso_camera is None:  # the view the polygon is drawn in
-                self._lasso_camera = _camera_pose(camera), float(camera.fov), float(camera.aspect)
-            origin = np.asarray(event.ray_origin, np.float64)
-            direction = np.asarray(event.ray_direction, np.float64)
-            corner = origin + LASSO_DRAW_M * direction / np.linalg.norm(direction)
-            self._lasso.append((np.asarray(event.screen_pos, np.float64), corner))
-            self._draw_lasso()
-
-    def _draw_lasso(self) -> None:
-        corners = np.array([world for _, world in self._lasso or []]).reshape(-1, 3)
-        if len(corners) < 2:
-            return
-        closed = np.concatenate([corners, corners[:1]])
-        self._lasso_line = self.server.scene.add_line_segments(
-            LASSO_NODE,
-            points=np.stack([closed[:-1], closed[1:]], axis=1),
-            colors=LASSO_COLOUR,
-            thickness=2.0,
-            thickness_units="screen",
-        )
-
-    def close_lasso(self) -> np.ndarray:
-        """Select the segment points shown inside the lasso (their segments become the
-        selection, and the page labels the points); returns the drive points taken."""
-        with self._lock:
-            corners, view = self._lasso or [], self._lasso_camera
-            self._end_lasso()
-            if len(corners) < 3 or view is None:
-                self._selection_text.content = "A lasso needs three corners: try again."
-                return np.zeros(0, np.int64)
-            candidates = self._segment_points()
-            T, fov, aspect = view
-            uv, in_front = project_to_screen(candidates.xyz, T, fov, aspect)
-            polygon = np.array([screen for screen, _ in corners])
-            taken = candidates.index[in_polygon(uv, in_front, polygon)]
-        self._fly_on_select = False  # the operator is looking at them
-        try:
-            self.session.select_points(taken)
-        finally:
-            self._fly_on_select = True
-        return taken
-
-    def _close_lasso_clicked(self) -> None:
-        self.close_lasso()
-
-    def cancel_lasso(self) -> None:
-        with self._lock:
-            self._end_lasso()
-        self._show_selection()
-
-    def _end_lasso(self) -> None:
-        self._lasso = None
-        self._lasso_camera = None
-        if self._lasso_line is not None:
-            self._lasso_line.remove()
-            self._lasso_line = None
-        self._lasso_start.visible = True
-        self._lasso_close.visible = self._lasso_cancel.visible = False
+            self._select_in_view(segments)
 
     def fly_to(self, segment: int) -> None:
         """Move the window and every browser's camera to a segment."""
@@ -441,8 +392,7 @@ class ReviewScene(TuningPanel):
     def close(self) -> None:
         """Stop listening to the session and cancel a pending re-run."""
         self.session.unsubscribe(self._on_session_event)
-        if self._tune_timer is not None:
-            self._tune_timer.cancel()
+        self._tune_runner.close()
 
     # -- session events ---------------------------------------------------------------------
 
@@ -453,9 +403,10 @@ class ReviewScene(TuningPanel):
         if event == "lasso_cancelled":  # the page was reloaded, or Escape pressed there
             with self._lock:
                 self._end_lasso()
-        self.recolour()
-        if event in ("selection", "labels", "predictions", "lasso_cancelled"):
-            self._show_selection()
+        if event != "selection":  # the labels or predictions changed: so do the colours
+            self.recolour()
+        self._send_selection()  # which points show may have changed with the labels
+        self._show_selection()
         if event == "selection" and len(segments) and self._fly_on_select:
             self.fly_to(int(segments[0]))
 
@@ -467,10 +418,13 @@ class ReviewScene(TuningPanel):
         """Show or hide a layer of :data:`LAYERS`."""
         self.layers[name] = bool(on)
         with self._lock:
-            if name == "points" and self._cloud is not None:
-                self._cloud.visible = self.layers["points"]
+            if name == "points":
+                for cloud in (self._cloud, self._selection_cloud):
+                    if cloud is not None:
+                        cloud.visible = self.layers["points"]
             elif name == "other":
                 self._send_cloud()
+                self._send_selection()
             elif name == "meshes":
                 for handle in [*self._meshes.values(), *self._ghosts.values()]:
                     handle.visible = self.layers["meshes"]
@@ -510,6 +464,8 @@ class ReviewScene(TuningPanel):
             self.point_size_m = float(size.value) / 100
             if self._cloud is not None:
                 self._cloud.point_size = self.point_size_m
+            if self._selection_cloud is not None:
+                self._selection_cloud.point_size = SELECTION_SIZE * self.point_size_m
 
         for name, box in layers.items():
             box.on_update(self._layer_toggle(name, box))
@@ -556,11 +512,3 @@ class ReviewScene(TuningPanel):
             f"label **{label}** ({reviewed}) · {int(seg['n_points'][s])} points  \n"
             "label it on the page beside the scene (g, o)"
         )
-
-
-def _camera_pose(camera: viser.CameraHandle) -> np.ndarray:
-    """(4, 4) T_world_camera of a browser's camera."""
-    T = np.eye(4)
-    T[:3, :3] = vtf.SO3(np.asarray(camera.wxyz)).as_matrix()
-    T[:3, 3] = camera.position
-    return T

@@ -2,16 +2,19 @@
 // segment, the label buttons, the review queue and the model box on the right.
 //
 // The selection lives on the server: a click in the 3D scene changes it there,
-// so we poll GET /api/selection; when this page selects something (queue, `n`,
-// ?segment=ID) it PUTs /api/selection, which also moves the 3D camera.
+// and a long poll of GET /api/selection?after=VERSION answers the moment it does;
+// when this page selects something (queue, `n`, ?segment=ID) it PUTs
+// /api/selection, which also moves the 3D camera.
 
 import * as api from "./api.js";
 import { int, pct, plural, toast } from "./api.js";
 import { closeZoom, initCamera, renderCamera, toggleCamera, toggleZoom, zoomOpen } from "./camera.js";
 import { initRoute, loadRoute, stepRun } from "./route.js";
 
-// A click in the 3D view changes the selection on the server: the page shows it within this.
-const SELECTION_POLL_MS = 200;
+// How long one long poll of the selection waits before it is asked again (seconds),
+// and how long after a failed one (ms).
+const SELECTION_WAIT_S = 20;
+const SELECTION_RETRY_MS = 1000;
 const JOB_POLL_MS = 500;
 const QUEUE_LIMIT = 10;
 const RUN_QUEUE_LIMIT = 200; // a run's doubtful segments, all of them in practice
@@ -32,8 +35,8 @@ const state = {
   // Bumped on every selection change made by this page: a poll that started
   // before it may carry the old selection and must be dropped.
   selectionSeq: 0,
+  selectionVersion: null, // the server's version of the selection this page has shown
   detailSeq: 0,
-  pollBusy: false,
   job: null, // {id, result} of the last fine-tuning job
   lastRefresh: 0,
   labelsVersion: 0, // bumped after every change: the camera image's colours follow the labels
@@ -162,27 +165,39 @@ function labelCountsText(info) {
 
 const sameIds = (a, b) => a.length === b.length && a.every((x, i) => x === b[i]);
 
-async function pollSelection() {
-  if (document.hidden || state.pollBusy) return;
-  state.pollBusy = true;
+/** Read the selection (with `wait`, a long poll that answers when it changes) and show it. */
+async function readSelection(wait) {
   const seq = state.selectionSeq;
-  try {
-    const sel = await api.get("/api/selection");
-    if (!$("banner").dataset.sticky) setBanner(null);
-    if (!state.info) loadInfo().catch(() => {});
-    if (seq !== state.selectionSeq) return; // this page changed it meanwhile
-    const ids = (sel && sel.segments) || [];
-    const lasso = (sel && sel.lasso_points) || 0;
-    if (!sameIds(ids, state.selection) || lasso !== state.lassoPoints) {
-      state.selection = ids;
-      state.lassoPoints = lasso;
-      renderQueue(); // highlight
-      await loadDetail();
+  const query =
+    wait && state.selectionVersion !== null
+      ? `?after=${state.selectionVersion}&wait_s=${SELECTION_WAIT_S}`
+      : "";
+  const sel = await api.get(`/api/selection${query}`);
+  if (!$("banner").dataset.sticky) setBanner(null);
+  if (!state.info) loadInfo().catch(() => {});
+  // This page changed the selection meanwhile: the answer may be older than that change.
+  // The version is not taken either, so the next poll answers at once with the current one.
+  if (seq !== state.selectionSeq) return;
+  state.selectionVersion = sel.version;
+  const ids = sel.segments || [];
+  const lasso = sel.lasso_points || 0;
+  if (!sameIds(ids, state.selection) || lasso !== state.lassoPoints) {
+    state.selection = ids;
+    state.lassoPoints = lasso;
+    renderQueue(); // highlight
+    await loadDetail();
+  }
+}
+
+/** Follow the selection the 3D view makes, for as long as the page is open. */
+async function followSelection() {
+  for (;;) {
+    try {
+      await readSelection(true);
+    } catch (err) {
+      setBanner(`Lost contact with the server: ${explain(err)}`);
+      await new Promise((resolve) => setTimeout(resolve, SELECTION_RETRY_MS));
     }
-  } catch (err) {
-    setBanner(`Lost contact with the server: ${explain(err)}`);
-  } finally {
-    state.pollBusy = false;
   }
 }
 
@@ -831,10 +846,12 @@ async function init() {
   if (wanted !== null && /^\d+$/.test(wanted)) {
     await run(() => selectSegments([Number(wanted)]));
   } else {
-    await pollSelection();
+    await readSelection(false).catch((err) =>
+      setBanner(`Lost contact with the server: ${explain(err)}`),
+    );
   }
   renderDetail();
-  setInterval(pollSelection, SELECTION_POLL_MS);
+  followSelection();
   await Promise.all([queueLoaded, routeLoaded]);
   document.body.dataset.state = "ready";
 }
