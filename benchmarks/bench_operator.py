@@ -27,11 +27,9 @@ at the next frame drawn), on the browser's one clock: Playwright's own dispatch 
 (60-250 ms here) and its polling for the change are left out, as an operator has neither.
 
 The figures are medians (and the max) of what was measured; the machine is named. Chromium
-here draws the 3D scene with software WebGL (SwiftShader) in the page's own process: redrawing
-400,000 points after every label and selection holds the page's script back. Steps 1-2 are
-therefore measured twice, with the scene and with the scene's address answered by an empty page
-(the page and the server alone, as on an operator's machine whose GPU draws the scene in
-milliseconds); both are reported.
+here draws the 3D scene with software WebGL (SwiftShader), which competes with the page and
+the server for the CPU. Steps 1-2 are therefore also measured with the scene's address answered
+by an empty page (the page and the server alone); both are reported.
 """
 
 from __future__ import annotations
