@@ -7,7 +7,8 @@ import pytest
 
 from guardrail_core.errors import ReconstructionError
 from guardrail_core.params import ParameterError
-from guardrail_core.reconstruct.beams import BeamParams, reconstruct_beam, unit_type
+from guardrail_core.reconstruct.beams import BeamParams, reconstruct_beam
+from guardrail_core.reconstruct.unit_type import unit_type
 from guardrail_core.synth.designs import thrie_beam_section, w_beam_section
 
 LENGTH = 4.0

@@ -12,10 +12,10 @@ from guardrail_core.extract.segments import (
     SegmentParams,
     Segments,
     absorb_fragments,
-    slice_components,
     summarise_segments,
     wireframe_components,
 )
+from guardrail_core.extract.slices import slice_components
 
 #: The thresholds these scenes are built around (the defaults at the time of writing).
 PARAMS = SegmentParams(

@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from guardrail_core.extract.segments import SegmentParams, slice_components
+from guardrail_core.extract.segments import SegmentParams
+from guardrail_core.extract.slices import slice_components
 
 PARAMS = SegmentParams()
 

@@ -7,7 +7,7 @@ import pytest
 
 from guardrail_core.extract.chains import piece_chains
 from guardrail_core.extract.correct import CorrectionParams, SegmentExtents
-from guardrail_core.extract.segments import SegmentParams, slice_components, summarise_segments
+from guardrail_core.extract.segments import SegmentParams, summarise_segments
 from guardrail_core.extract.shape_features import (
     NEIGHBOUR_FEATURE_NAMES,
     SEGMENT_FEATURE_DIM,
@@ -18,6 +18,7 @@ from guardrail_core.extract.shape_features import (
     segment_features,
     shape_features,
 )
+from guardrail_core.extract.slices import slice_components
 
 PARAMS = SegmentParams(slice_length_m=0.5)
 

@@ -15,14 +15,8 @@ from __future__ import annotations
 import numpy as np
 
 from guardrail_core.extract.lattice import Lattice
-from guardrail_core.extract.segments import (
-    ROUNDING_M,
-    SPAN_TAIL,
-    SegmentParams,
-    depth_from_path,
-    group_shares,
-    wireframe_components,
-)
+from guardrail_core.extract.segments import SegmentParams, wireframe_components
+from guardrail_core.extract.slices import ROUNDING_M, SPAN_TAIL, depth_from_path, group_shares
 
 
 def curb_points(

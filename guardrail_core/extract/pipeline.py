@@ -27,11 +27,11 @@ from guardrail_core.extract.segments import (
     Segments,
     SegmentSummary,
     absorb_fragments,
-    slice_components,
     summarise_segments,
     wireframe_components,
 )
 from guardrail_core.extract.shape_features import segment_features
+from guardrail_core.extract.slices import slice_components
 from guardrail_core.formats.drive import Drive
 from guardrail_core.formats.run_folder import POINT_OFF_ROAD, POINT_ROAD
 from guardrail_core.params import ParameterError, StageParams, apply_settings

@@ -46,7 +46,7 @@ from guardrail_core.io.meshes import export_mesh_files, write_meshes
 from guardrail_core.params import ParameterError, StageParams, apply_settings
 from guardrail_core.progress import progress_bar
 from guardrail_core.reconstruct.assemble import run_mesh
-from guardrail_core.reconstruct.beams import BeamParams, reconstruct_beam, unit_type
+from guardrail_core.reconstruct.beams import BeamParams, reconstruct_beam
 from guardrail_core.reconstruct.inventory import (
     inventory_rows,
     write_inventory_csv,
@@ -59,6 +59,7 @@ from guardrail_core.reconstruct.poles import PoleParams, detect_poles
 from guardrail_core.reconstruct.register import RegisterParams, Superimposition, superimpose
 from guardrail_core.reconstruct.runs import RunParams, group_runs
 from guardrail_core.reconstruct.sweep import SweepParams
+from guardrail_core.reconstruct.unit_type import unit_type
 from guardrail_core.reconstruct.units import UnitParams, order_poles, split_units
 
 
