@@ -14,7 +14,8 @@ from guardrail_core.errors import GuardrailError, IncompatibleModelError, Traini
 from guardrail_core.extract.classify import ClassifierParams
 from guardrail_core.formats.drive import drive_parts
 from guardrail_core.reconstruct.drive_input import gather_reconstruction_points
-from guardrail_core.reconstruct.pipeline import ReconstructionParams, reconstruct_into
+from guardrail_core.reconstruct.pipeline import ReconstructionParams
+from guardrail_core.reconstruct.writing import reconstruct_into
 from guardrail_core.review.training import predict_run, train_from_run, write_predictions
 
 Report = Callable[[float, str], None]

@@ -125,7 +125,7 @@ def test_the_api_cancels_a_queued_reconstruction_and_refuses_a_second(
 def test_a_reconstruction_stopped_half_way_leaves_the_previous_one(
     session: ReviewSession,
 ) -> None:
-    from guardrail_core.reconstruct.pipeline import reconstruct_into
+    from guardrail_core.reconstruct.writing import reconstruct_into
 
     folder = session.run.root / "reconstruction"
     before = file_tree(folder)

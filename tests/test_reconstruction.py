@@ -19,7 +19,7 @@ from guardrail_core.evaluate.detection import evaluate_run
 from guardrail_core.formats.drive import Drive
 from guardrail_core.formats.run_folder import POINT_ROAD, load_run
 from guardrail_core.formats.run_folder_paths import RunFolder
-from guardrail_core.reconstruct import pipeline
+from guardrail_core.reconstruct import writing
 from guardrail_core.reconstruct.inventory import inventory_rows
 from guardrail_core.reconstruct.pipeline import (
     Reconstruction,
@@ -138,11 +138,11 @@ def test_a_failure_while_writing_keeps_the_old_reconstruction(
         raise OSError("disk full")
 
     # No guardrails to fit (quick); the meshes, written last, fail half way.
-    monkeypatch.setattr(pipeline, "reconstruct_guardrails", lambda *a, **k: Reconstruction([], []))
-    monkeypatch.setattr(pipeline, "write_meshes", half_written)
+    monkeypatch.setattr(writing, "reconstruct_guardrails", lambda *a, **k: Reconstruction([], []))
+    monkeypatch.setattr(writing, "write_meshes", half_written)
     loaded = load_run(run)
     with pytest.raises(OSError, match="disk full"):
-        pipeline.reconstruct_into(
+        writing.reconstruct_into(
             run,
             drive.points.xyz,
             loaded.point_segment,

@@ -29,7 +29,7 @@ def run(args: argparse.Namespace) -> int:
     from guardrail_core.formats.drive import drive_parts, open_drive
     from guardrail_core.formats.run_folder_paths import RunFolder
     from guardrail_core.reconstruct.drive_input import gather_reconstruction_points
-    from guardrail_core.reconstruct.pipeline import reconstruct_into
+    from guardrail_core.reconstruct.writing import reconstruct_into
 
     params = common.reconstruction_params(args)
     run_folder = RunFolder(Path(args.run_dir))

@@ -231,7 +231,7 @@ class RunCounts:
 
 @dataclass(frozen=True)
 class ReconstructionSummary:
-    """What a reconstruction wrote (:func:`guardrail_core.reconstruct.pipeline.reconstruct_into`).
+    """What a reconstruction wrote (:func:`guardrail_core.reconstruct.writing.reconstruct_into`).
 
     Attributes
     ----------

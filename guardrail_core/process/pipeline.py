@@ -54,8 +54,8 @@ from guardrail_core.reconstruct.pipeline import (
     ReconstructionParams,
     RunInput,
     reconstruct_run_meshes,
-    write_reconstruction,
 )
+from guardrail_core.reconstruct.writing import write_reconstruction
 from guardrail_core.sensors.track import TrackCoordinates, track_coordinates
 
 #: Metres of its neighbours a tile sees on either side: well beyond a post's or a hole's slices

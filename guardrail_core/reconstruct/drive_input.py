@@ -38,7 +38,7 @@ def gather_reconstruction_points(
     -------
     xyz : (K, 3) float64, local frame, in drive order
     point_segment : (K,) int32, each point's segment (``POINT_ROAD`` for the road points), as
-        :func:`guardrail_core.reconstruct.pipeline.reconstruct_into` takes them
+        :func:`guardrail_core.reconstruct.writing.reconstruct_into` takes them
 
     Raises
     ------
