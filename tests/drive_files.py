@@ -9,8 +9,9 @@ from pathlib import Path
 import laspy
 import numpy as np
 
-from guardrail_core.formats.drive import Drive, PointCloud, Truth, write_drive_files
+from guardrail_core.formats.drive import Drive, PointCloud, Truth
 from guardrail_core.formats.drive_tiles import INDEX_FILE, read_tile_index
+from guardrail_core.formats.drive_writer import write_drive_files
 
 
 def tile_file(root: Path, k: int = 0) -> Path:

@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 from guardrail_core.distributed import ClusterSpec
-from guardrail_core.formats.drive import Drive, load_drive, open_drive, write_drive_files
+from guardrail_core.formats.drive import Drive, load_drive, open_drive
+from guardrail_core.formats.drive_writer import write_drive_files
 from guardrail_core.formats.run_folder import POINT_UNPROCESSED
 from guardrail_core.formats.run_folder_paths import RunFolder
 from guardrail_core.process import process_drive, process_drive_folder

@@ -38,11 +38,8 @@ from guardrail_core.errors import (
     SourceFormatError,
 )
 from guardrail_core.formats.atomic import check_output, staged_folder
-from guardrail_core.formats.drive import (
-    ImageRecord,
-    PointCloud,
-    write_drive_files,
-)
+from guardrail_core.formats.drive import ImageRecord, PointCloud
+from guardrail_core.formats.drive_writer import write_drive_files
 from guardrail_core.geom.frames import euler_from_rotation, invert_transform, make_transform
 from guardrail_core.importers.calibration import require_file
 from guardrail_core.progress import progress_bar

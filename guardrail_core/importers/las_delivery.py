@@ -39,8 +39,9 @@ from guardrail_core.errors import (
     SourceFormatError,
 )
 from guardrail_core.formats.atomic import check_output, staged_folder
-from guardrail_core.formats.drive import ImageRecord, write_drive_metadata
+from guardrail_core.formats.drive import ImageRecord
 from guardrail_core.formats.drive_tiles import DEFAULT_DRIVE_TILE_M, TiledPointWriter
+from guardrail_core.formats.drive_writer import write_drive_metadata
 from guardrail_core.geom.frames import make_transform
 from guardrail_core.importers.calibration import read_calibrations, require_file
 from guardrail_core.importers.delivery_scanner import (

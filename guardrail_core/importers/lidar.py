@@ -31,7 +31,8 @@ import numpy as np
 
 from guardrail_core.errors import MissingSourceFileError, SourceFormatError
 from guardrail_core.formats.atomic import check_output, staged_folder
-from guardrail_core.formats.drive import ImageRecord, PointCloud, write_drive_files
+from guardrail_core.formats.drive import ImageRecord, PointCloud
+from guardrail_core.formats.drive_writer import write_drive_files
 from guardrail_core.geom.frames import euler_from_rotation, invert_transform
 from guardrail_core.importers.calibration import read_calibrations
 from guardrail_core.importers.kitti import MAX_SWEEPS, recover_rings

@@ -22,8 +22,9 @@ import yaml
 from guardrail_core.classes import TruthClass
 from guardrail_core.errors import InvalidOptionError, MissingDriveFileError
 from guardrail_core.formats.atomic import staged_folder
-from guardrail_core.formats.drive import Drive, write_drive_metadata
+from guardrail_core.formats.drive import Drive
 from guardrail_core.formats.drive_tiles import DEFAULT_DRIVE_TILE_M, TiledPointWriter
+from guardrail_core.formats.drive_writer import write_drive_metadata
 from guardrail_core.progress import progress_bar
 from guardrail_core.synth.camera_rig import default_camera_rig
 from guardrail_core.synth.camera_shots import ShotWriter, shot_times
