@@ -74,7 +74,7 @@ from guardrail_core.formats.drive import open_drive  # noqa: E402
 from guardrail_core.formats.run_folder_paths import RunFolder  # noqa: E402
 from guardrail_core.process import process_drive_folder  # noqa: E402
 from guardrail_core.reconstruct.run_models import load_run_models  # noqa: E402
-from guardrail_core.synth.scene import random_scene_spec  # noqa: E402
+from guardrail_core.synth.random_scene import random_scene_spec  # noqa: E402
 from guardrail_core.synth.simulate import (  # noqa: E402
     SIMULATOR_VERSION,
     SimulationOptions,

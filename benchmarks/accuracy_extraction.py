@@ -40,7 +40,7 @@ from guardrail_core.extract.training import train_from_drives  # noqa: E402
 from guardrail_core.formats.drive import load_drive  # noqa: E402
 from guardrail_core.formats.run_folder import load_run  # noqa: E402
 from guardrail_core.process import process_drive  # noqa: E402
-from guardrail_core.synth.scene import random_scene_spec  # noqa: E402
+from guardrail_core.synth.random_scene import random_scene_spec  # noqa: E402
 from guardrail_core.synth.simulate import simulate_drive  # noqa: E402
 
 LENGTH_M = 150.0

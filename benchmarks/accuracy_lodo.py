@@ -73,7 +73,7 @@ from guardrail_core.extract.training import (  # noqa: E402
 )
 from guardrail_core.process import process_drive_folder  # noqa: E402
 from guardrail_core.synth.designs import list_designs  # noqa: E402
-from guardrail_core.synth.scene import random_scene_spec  # noqa: E402
+from guardrail_core.synth.random_scene import random_scene_spec  # noqa: E402
 from guardrail_core.synth.simulate import simulate_drive  # noqa: E402
 
 TARGET_F = 0.95

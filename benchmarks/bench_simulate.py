@@ -45,7 +45,7 @@ def _simulate_once(
     out: str, length: float, seed: int, tile_m: float, image_every: float, roadside: bool = True
 ) -> dict:
     """Simulate one drive in this process; its summary and this process's peak memory."""
-    from guardrail_core.synth.scene import random_scene_spec
+    from guardrail_core.synth.random_scene import random_scene_spec
     from guardrail_core.synth.simulate import simulate_drive
 
     options = SimulationOptions(image_every_m=image_every)

@@ -9,7 +9,8 @@ from guardrail_core.classes import TruthClass
 from guardrail_core.errors import SceneSpecError
 from guardrail_core.synth.designs import load_design
 from guardrail_core.synth.kerb_planting import TREE_SETBACK_M, TREE_SPACING_M
-from guardrail_core.synth.scene import build_scene, random_scene_spec
+from guardrail_core.synth.random_scene import random_scene_spec
+from guardrail_core.synth.scene import build_scene
 
 
 def test_young_trees_stand_behind_pipe_railings_and_leave_the_street_as_it_was() -> None:

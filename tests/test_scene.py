@@ -12,13 +12,8 @@ from guardrail_core.classes import TruthClass
 from guardrail_core.errors import SceneSpecError
 from guardrail_core.synth.confounders import CONFOUNDER_KINDS
 from guardrail_core.synth.designs import list_designs, load_design
-from guardrail_core.synth.scene import (
-    LONG_RUN_M,
-    build_scene,
-    list_scenes,
-    load_scene_spec,
-    random_scene_spec,
-)
+from guardrail_core.synth.random_scene import LONG_RUN_M, random_scene_spec
+from guardrail_core.synth.scene import build_scene, list_scenes, load_scene_spec
 from guardrail_core.synth.vegetation import VEGETATION_KINDS
 
 

@@ -13,7 +13,8 @@ from guardrail_core.errors import InvalidOptionError
 from guardrail_core.formats.drive import Drive, load_drive, open_drive
 from guardrail_core.formats.drive_tiles import vehicle_station
 from guardrail_core.synth.mesh import MeshBuilder
-from guardrail_core.synth.scene import build_scene, load_scene_spec, plan_scene, random_scene_spec
+from guardrail_core.synth.random_scene import random_scene_spec
+from guardrail_core.synth.scene import build_scene, load_scene_spec, plan_scene
 from guardrail_core.synth.scene_window import SceneWindows, drive_windows
 from guardrail_core.synth.simulate import SimulationOptions, simulate_drive
 from guardrail_core.synth.vehicle import drive_along

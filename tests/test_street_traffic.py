@@ -8,7 +8,8 @@ import pytest
 from guardrail_core.classes import TruthClass
 from guardrail_core.errors import SceneSpecError
 from guardrail_core.synth.designs import load_design
-from guardrail_core.synth.scene import build_scene, random_scene_spec
+from guardrail_core.synth.random_scene import random_scene_spec
+from guardrail_core.synth.scene import build_scene
 from guardrail_core.synth.street_traffic import MEDIAN_GAP_M
 
 

@@ -12,9 +12,10 @@ from guardrail_core.classes import TruthClass
 from guardrail_core.errors import SceneSpecError
 from guardrail_core.formats.drive import load_drive
 from guardrail_core.synth.mesh import MeshBuilder
+from guardrail_core.synth.random_scene import random_scene_spec
 from guardrail_core.synth.raycast import SceneRaycaster
 from guardrail_core.synth.road import Road, Roadside, RoadSpec
-from guardrail_core.synth.scene import build_scene, plan_scene, random_scene_spec
+from guardrail_core.synth.scene import build_scene, plan_scene
 from guardrail_core.synth.simulate import SimulationOptions, simulate_drive
 from guardrail_core.synth.vegetation import SIZES, VEGETATION_KINDS, build_vegetation
 

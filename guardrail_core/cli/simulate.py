@@ -167,7 +167,8 @@ def add_parser(subparsers: common.Subparsers) -> None:
 def run(args: argparse.Namespace) -> int:
     from guardrail_core.errors import InvalidOptionError
     from guardrail_core.formats.drive import open_drive
-    from guardrail_core.synth.scene import load_scene_spec, random_scene_spec
+    from guardrail_core.synth.random_scene import random_scene_spec
+    from guardrail_core.synth.scene import load_scene_spec
     from guardrail_core.synth.simulate import SimulationOptions, simulate_drive
 
     if args.scene:

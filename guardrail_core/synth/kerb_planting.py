@@ -3,7 +3,7 @@ hedges, as junctions and town streets hold them.
 
 A young tree's trunk and stake have a railing post's girth and stand a step behind the rail, so
 a classifier must learn them from the geometry around them. Added to a random street's spec
-(:func:`~guardrail_core.synth.scene.random_scene_spec`) from a random stream of its own, so a
+(:func:`~guardrail_core.synth.random_scene.random_scene_spec`) from a random stream of its own, so a
 street without them is the street of the same seed.
 """
 

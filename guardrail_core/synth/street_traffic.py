@@ -1,8 +1,9 @@
 """What real scans of multi-lane roads hold and plain random streets lacked: medians of two
 beams back to back with a hedge between, and cars in the lanes beside the mapping vehicle.
 
-Each is added to a random street's spec (:func:`~guardrail_core.synth.scene.random_scene_spec`)
-from a random stream of its own, so a street without them is the street of the same seed.
+Each is added to a random street's spec
+(:func:`~guardrail_core.synth.random_scene.random_scene_spec`) from a random stream of its own, so
+a street without them is the street of the same seed.
 """
 
 from __future__ import annotations
