@@ -71,7 +71,7 @@ from fastapi.testclient import TestClient  # noqa: E402
 
 from app.jobs import JobRunner  # noqa: E402
 from app.main import create_app  # noqa: E402
-from app.scene.tuning import RunTuner, with_value  # noqa: E402
+from app.run_tuning import RunTuner, with_value  # noqa: E402
 from app.scene.viewer import ReviewScene  # noqa: E402
 from app.session import ReviewSession  # noqa: E402
 from guardrail_core.errors import GuardrailError  # noqa: E402

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 from fastapi.testclient import TestClient
 
-from app.scene.tuning import RunTuner
+from app.run_tuning import RunTuner
 from app.serve import default_run
 from app.session import ReviewSession
 from guardrail_core.errors import (

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from app.scene import tuning
-from app.scene.tuning import RunTuner
+from app import run_tuning
+from app.run_tuning import RunTuner
 from app.session import ReviewSession
 from guardrail_core.reconstruct.pipeline import reconstruct_unit
 
@@ -80,7 +80,7 @@ def test_every_pipe_run_re_run_with_its_thresholds_is_the_stored_model(
         given.append(kwargs.get("unit_of_point"))
         return reconstruct_unit(*args, **kwargs)
 
-    monkeypatch.setattr(tuning, "reconstruct_unit", spy)
+    monkeypatch.setattr(run_tuning, "reconstruct_unit", spy)
     tuner = RunTuner(module_session.run.root)
     pipe_runs = [r for r in tuner.tunable_runs() if r.model and r.model.type == "pipe"]
     assert pipe_runs

@@ -14,6 +14,7 @@ from fastapi.testclient import TestClient
 from app.jobs import JobRunner
 from app.main import create_app
 from app.route_overview import run_places
+from app.run_tuning import RunTuner, unit_numbers, with_value
 from app.scene.colours import (
     GUARDRAIL,
     NO_VALUE,
@@ -25,7 +26,6 @@ from app.scene.colours import (
     probability_colours,
 )
 from app.scene.picking import in_polygon, in_rectangle, pick_along_ray, project_to_screen
-from app.scene.tuning import RunTuner, unit_numbers, with_value
 from app.scene.viewer import ReviewScene
 from app.scene.window import window_points
 from app.session import ReviewSession

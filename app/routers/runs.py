@@ -7,7 +7,7 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Depends, HTTPException, Query
 
 from app.dependencies import get_session
-from app.scene.tuning import TUNABLE, RunTuner, unit_numbers, with_value
+from app.run_tuning import TUNABLE, RunTuner, unit_numbers, with_value
 from app.schemas import NOT_FOUND, RunHistogram
 from app.session import ReviewSession
 from guardrail_core.errors import ReconstructionError, RunFolderError

@@ -19,8 +19,8 @@ import viser
 
 from app import review_jobs
 from app.jobs import JobBusyError, JobRunner
+from app.run_tuning import TUNABLE, RunTuner, slider_value, unit_numbers, with_value
 from app.scene.latest_only import LatestOnly
-from app.scene.tuning import TUNABLE, RunTuner, slider_value, unit_numbers, with_value
 from app.session import ReviewSession
 from guardrail_core.errors import GuardrailError
 from guardrail_core.io.meshes import run_file_stem

@@ -24,11 +24,11 @@ import viser.transforms as vtf
 from app.jobs import JobRunner
 from app.route_overview import run_stations
 from app.run_tiles import TilePoints
+from app.run_tuning import RunTuner
 from app.scene.colours import COLOUR_MODES, SELECTED, colour_legend, point_colours
 from app.scene.lasso_tool import LASSO_HELP, LassoTool
 from app.scene.latest_only import LatestOnly
 from app.scene.picking import camera_pose, in_rectangle, pick_along_ray, project_to_screen
-from app.scene.tuning import RunTuner
 from app.scene.tuning_panel import MESH_COLOUR, TuningPanel, mesh_node
 from app.scene.window import window_points
 from app.session import ReviewSession

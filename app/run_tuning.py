@@ -1,8 +1,10 @@
 """Live threshold tuning: re-run one run's unit model from its superimposed points (§4.3-4.4).
 
-The sliders of the 3D scene change a few reconstruction parameters; each change re-runs
+The sliders of the 3D scene (:mod:`app.scene.tuning_panel`) and ``GET /api/runs/{id}/histogram``
+change a few reconstruction parameters; each change re-runs
 :func:`guardrail_core.reconstruct.pipeline.reconstruct_unit` on the points kept in
 ``reconstruction/superimposed.npz`` and rebuilds that run's mesh, without touching the run folder.
+It imports no part of the viser scene.
 """
 
 from __future__ import annotations
