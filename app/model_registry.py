@@ -1,9 +1,9 @@
 """The models an operator can activate: those fine-tuned in the app, and the one that made the run.
 
 Each fine-tuned model is a model folder ``REVIEW_DIR/models/<version>/`` (see
-:mod:`guardrail_core.extract.model_folder`). The active model is the one whose predictions the run
-folder holds (``run.json``'s ``model.version``): activating a model re-predicts the run and writes
-its predictions into the run folder.
+:mod:`guardrail_core.extract.classify.model_folder`). The active model is the one whose
+predictions the run folder holds (``run.json``'s ``model.version``): activating a model
+re-predicts the run and writes its predictions into the run folder.
 """
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from guardrail_core.extract.classify import GuardrailClassifier
-from guardrail_core.extract.model_folder import MODEL_FILE, load_model, save_model
+from guardrail_core.extract.classify.crop_classifier import GuardrailClassifier
+from guardrail_core.extract.classify.model_folder import MODEL_FILE, load_model, save_model
 from guardrail_core.formats.run_folder import Run
 from guardrail_core.review.model_lineage import (
     fine_tuned_models,

@@ -4,9 +4,8 @@ A stage's parameters are declared once, as a :class:`~guardrail_core.params.Stag
 dataclass with each field's type, unit and range. Here each becomes a pydantic model with the
 same fields, defaults and ranges, so that ``/openapi.json`` states exactly what a route accepts
 (a client, or a fuzzer, can build a valid body from the schema alone) and FastAPI refuses a value
-out of range before the route runs. Names of earlier versions (``renamed``) are not offered: the
-pages send today's names. Rules between fields (``check_relations``) cannot be said in JSON
-Schema; the route refuses them with a 422 of the same shape.
+out of range before the route runs. Rules between fields (``check_relations``) cannot be said
+in JSON Schema; the route refuses them with a 422 of the same shape.
 """
 
 from __future__ import annotations

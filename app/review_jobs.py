@@ -11,12 +11,13 @@ import numpy as np
 from app.jobs import JobFailed
 from app.session import ReviewSession
 from guardrail_core.errors import GuardrailError, IncompatibleModelError, TrainingDataError
-from guardrail_core.extract.classify import ClassifierParams
+from guardrail_core.extract.classify.crop_classifier_params import ClassifierParams
 from guardrail_core.formats.drive import drive_parts
 from guardrail_core.reconstruct.drive_input import gather_reconstruction_points
 from guardrail_core.reconstruct.pipeline import ReconstructionParams
 from guardrail_core.reconstruct.writing import reconstruct_into
-from guardrail_core.review.training import predict_run, train_from_run, write_predictions
+from guardrail_core.review.predictions import predict_run, write_predictions
+from guardrail_core.review.training import train_from_run
 
 Report = Callable[[float, str], None]
 

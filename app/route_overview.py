@@ -21,6 +21,7 @@ from app.session import ReviewSession
 from guardrail_core.errors import GuardrailError
 from guardrail_core.formats.drive_tiles import vehicle_station
 from guardrail_core.reconstruct.inventory import inventory_rows
+from guardrail_core.reconstruct.inventory_row import InventoryRow
 from guardrail_core.reconstruct.model import RunModel
 from guardrail_core.reconstruct.model_json import run_model_from_json
 from guardrail_core.review.queue import asked_segments, segment_queue_scores, unchecked_runs
@@ -42,7 +43,7 @@ UNREVIEWED, STARTED, DONE = "unreviewed", "started", "done"
 class RunPlace:
     """A reconstructed run on the map."""
 
-    row: dict  # its inventory row (:func:`guardrail_core.reconstruct.inventory.inventory_rows`)
+    row: InventoryRow  # its inventory row
     path: np.ndarray  # (P, 2) float64, its poles in order, local metres
     station_m: float  # metres along the drive where it starts: the nearest of its poles
     station_end_m: float  # ... and where it ends
@@ -85,7 +86,7 @@ def _read_run_places(session: ReviewSession) -> list[RunPlace]:
         for k, (model, row) in enumerate(zip(models, rows, strict=True))
         if model.poles
     ]
-    return sorted(places, key=lambda p: (p.station_m, p.row["run_id"]))
+    return sorted(places, key=lambda p: (p.station_m, p.row.run_id))
 
 
 def run_stations(runs: Sequence[RunModel], trajectory: Trajectory) -> list[tuple[float, float]]:
@@ -162,12 +163,12 @@ def route_overview(session: ReviewSession) -> dict:
         row = place.row
         runs.append(
             {
-                "run_id": row["run_id"],
-                "status": row["status"],
-                "type": row["type"],
-                "signature": row["signature"],
-                "length_m": row["length_m"],
-                "poles": row["pole_count"],
+                "run_id": row.run_id,
+                "status": row.status,
+                "type": row.type,
+                "signature": row.signature,
+                "length_m": row.length_m,
+                "poles": row.pole_count,
                 "station_m": round(place.station_m, 1),
                 "path": np.round(place.path, 2).tolist(),
                 "segments": len(mine),

@@ -29,14 +29,20 @@ from guardrail_core.reconstruct.pipeline import (
 )
 from guardrail_core.reconstruct.run_models import load_run_models
 
-#: The sliders: (stage, parameter) -> (label, min, max, step).
-TUNABLE: dict[tuple[str, str], tuple[str, float, float, float]] = {
-    ("pipes", "histogram_factor"): ("histogram threshold (x median)", 1.0, 6.0, 0.1),
-    ("pipes", "radius_share"): ("share of points for the radius", 0.5, 1.0, 0.01),
-    ("pipes", "slice_interval_m"): ("pipe slice interval (m)", 0.01, 0.1, 0.005),
-    ("pipes", "taubin_iterations"): ("smoothing passes (Taubin)", 0, 40, 1),
-    ("beams", "slice_interval_m"): ("beam slice interval (m)", 0.005, 0.05, 0.005),
-}
+
+def _sliders() -> dict[tuple[str, str], tuple[str, float, float, float]]:
+    """The reconstruction's parameters that declare a :class:`~guardrail_core.params.Slider`,
+    in the order the stages run: (stage, parameter) -> (label, min, max, step)."""
+    return {
+        (stage, spec.name): (spec.slider.label, spec.slider.low, spec.slider.high, spec.slider.step)
+        for stage, kind in ReconstructionParams.stage_classes().items()
+        for spec in kind.specs()
+        if spec.slider is not None
+    }
+
+
+#: The tuning panel's sliders, from the parameters' own declarations.
+TUNABLE = _sliders()
 
 
 def slider_value(key: tuple[str, str], value: object, default: float) -> float:

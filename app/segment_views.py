@@ -133,7 +133,7 @@ def review_queue(
         in_scope = np.ones(len(asked), bool)
     else:
         places = run_places(session)
-        found = [k for k, place in enumerate(places) if place.row["run_id"] == run]
+        found = [k for k, place in enumerate(places) if place.row.run_id == run]
         if not found:
             raise KeyError(f"no guardrail run {run} with poles")
         in_scope = segment_runs(session, places) == found[0]

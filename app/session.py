@@ -26,7 +26,7 @@ from app.model_registry import ModelRegistry
 from app.run_tiles import RunTiles
 from app.version_watch import VersionWatch
 from guardrail_core.errors import InvalidOptionError
-from guardrail_core.extract.classifier_params import ClassifierParams
+from guardrail_core.extract.classify.crop_classifier_params import ClassifierParams
 from guardrail_core.formats.drive import DriveSource, open_drive
 from guardrail_core.formats.label_store import LABEL_GUARDRAIL, LABEL_OTHER, LabelChange, LabelStore
 from guardrail_core.formats.run_folder import Run

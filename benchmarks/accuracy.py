@@ -6,7 +6,7 @@ Usage::
         [--data benchmarks/data/accuracy] [--set STAGE.NAME=VALUE ...] [--model DIR] [--json]
 
 **The rule.** Seeds 10001-19999 belong to this benchmark alone: no training drive, test, example,
-figure or tuning uses them (``tests/test_accuracy_seeds.py`` fails if another file of the
+figure or tuning uses them (``tests/benchmarks/test_accuracy_seeds.py`` fails if another file of the
 repository names one). The benchmark's streets are the random 300 m streets of seeds 10001,
 10002, ... (``guardrail simulate DRIVE --length 300 --seed S``: every design and confounder, one
 to three lanes, far-side guardrails, parked cars, curves), simulated once into ``--data`` and
@@ -69,7 +69,7 @@ from guardrail_core.evaluate.misses import (  # noqa: E402
     explain_misses,
 )
 from guardrail_core.evaluate.reconstruction import PolePointCounter  # noqa: E402
-from guardrail_core.extract.model_folder import DEFAULT_MODEL_DIR  # noqa: E402
+from guardrail_core.extract.classify.model_folder import DEFAULT_MODEL_DIR  # noqa: E402
 from guardrail_core.formats.drive import open_drive  # noqa: E402
 from guardrail_core.formats.run_folder_paths import RunFolder  # noqa: E402
 from guardrail_core.process import process_drive_folder  # noqa: E402

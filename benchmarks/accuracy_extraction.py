@@ -34,9 +34,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from guardrail_core.evaluate.detection import detection_metrics  # noqa: E402
-from guardrail_core.extract.classify import ClassifierParams  # noqa: E402
+from guardrail_core.extract.classify.crop_classifier_params import ClassifierParams  # noqa: E402
+from guardrail_core.extract.classify.model_training import train_from_drives  # noqa: E402
 from guardrail_core.extract.segment_truth import segment_truth  # noqa: E402
-from guardrail_core.extract.training import train_from_drives  # noqa: E402
 from guardrail_core.formats.drive import load_drive  # noqa: E402
 from guardrail_core.formats.run_folder import load_run  # noqa: E402
 from guardrail_core.process import process_drive  # noqa: E402

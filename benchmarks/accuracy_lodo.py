@@ -59,18 +59,18 @@ sys.path.insert(0, str(ROOT))
 
 from guardrail_core.distributed import ClusterSpec  # noqa: E402
 from guardrail_core.evaluate.detection import evaluate_run_folder  # noqa: E402
-from guardrail_core.extract.backbone import embed_crops  # noqa: E402
-from guardrail_core.extract.classify import ClassifierParams  # noqa: E402
-from guardrail_core.extract.model_folder import save_model  # noqa: E402
-from guardrail_core.extract.pipeline import ExtractionParams  # noqa: E402
-from guardrail_core.extract.segment_head import SegmentHeadParams  # noqa: E402
-from guardrail_core.extract.shape_features import SEGMENT_FEATURE_NAMES  # noqa: E402
-from guardrail_core.extract.training import (  # noqa: E402
+from guardrail_core.extract.classify.backbone import embed_crops  # noqa: E402
+from guardrail_core.extract.classify.crop_classifier_params import ClassifierParams  # noqa: E402
+from guardrail_core.extract.classify.model_folder import save_model  # noqa: E402
+from guardrail_core.extract.classify.model_training import (  # noqa: E402
     TrainingSet,
     labelled_segments,
     train_from_drives,
     train_on_set,
 )
+from guardrail_core.extract.classify.segment_head import SegmentHeadParams  # noqa: E402
+from guardrail_core.extract.classify.shape_features import SEGMENT_FEATURE_NAMES  # noqa: E402
+from guardrail_core.extract.pipeline import ExtractionParams  # noqa: E402
 from guardrail_core.process import process_drive_folder  # noqa: E402
 from guardrail_core.synth.designs import list_designs  # noqa: E402
 from guardrail_core.synth.random_scene import random_scene_spec  # noqa: E402
@@ -221,7 +221,7 @@ def street_set(drive: Path, crop_size: int) -> TrainingSet:
 
 def joined(sets: list[TrainingSet]) -> TrainingSet:
     """One training set of several drives' (each drive's spatial blocks kept apart, as
-    :func:`~guardrail_core.extract.training.labelled_segments` numbers them)."""
+    :func:`~guardrail_core.extract.classify.model_training.labelled_segments` numbers them)."""
     return TrainingSet(
         features=np.concatenate([s.features for s in sets]),
         labels=np.concatenate([s.labels for s in sets]),

@@ -23,9 +23,10 @@ on a viser server of a free local port (8700 and up):
    the drive and the run) is reported once as "load".
 3. **Fast-mode retrain on 2,000 labelled crops** (target <= 20 s):
    :func:`guardrail_core.review.training.train_from_run` in fast mode on the run; when the run
-   has fewer than 2,000 crops, also :func:`guardrail_core.extract.training.train_on_set` on the run's
-   training set concatenated with itself (each copy's blocks kept apart) until it has 2,000
-   crops, which is the figure judged against the target.
+   has fewer than 2,000 crops, also
+   :func:`guardrail_core.extract.classify.model_training.train_on_set` on the run's training
+   set concatenated with itself (each copy's blocks kept apart) until it has 2,000 crops, which
+   is the figure judged against the target.
 4. **Live re-run of one unit model** (target < 250 ms): ``RunTuner(run).retune(run_id, params)``
    for every reconstructed run, the sliders moved a little on each repeat; the time includes
    rebuilding the run's mesh. Skipped, with a note, when the run has no ``reconstruction/``.
@@ -75,9 +76,9 @@ from app.run_tuning import RunTuner, with_value  # noqa: E402
 from app.scene.viewer import ReviewScene  # noqa: E402
 from app.session import ReviewSession  # noqa: E402
 from guardrail_core.errors import GuardrailError  # noqa: E402
-from guardrail_core.extract.classify import ClassifierParams  # noqa: E402
-from guardrail_core.extract.segment_head import SegmentHeadParams  # noqa: E402
-from guardrail_core.extract.training import TrainingSet, train_on_set  # noqa: E402
+from guardrail_core.extract.classify.crop_classifier_params import ClassifierParams  # noqa: E402
+from guardrail_core.extract.classify.model_training import TrainingSet, train_on_set  # noqa: E402
+from guardrail_core.extract.classify.segment_head import SegmentHeadParams  # noqa: E402
 from guardrail_core.reconstruct.pipeline import ReconstructionParams  # noqa: E402
 from guardrail_core.review.training import train_from_run, training_set_from_run  # noqa: E402
 

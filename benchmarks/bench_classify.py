@@ -22,8 +22,8 @@ of ``guardrail process`` runs torch on one thread, so everything here does too.
    and segments (embed, fast head, segment head), once each: as before this benchmark (torch,
    batches of 64), on torch and on ONNX Runtime at the default batch, and on ONNX Runtime asked
    only about the crops whose segment's shape does not decide
-   (:meth:`~guardrail_core.extract.crop_classifier.GuardrailClassifier.shape_decides`), with the
-   number of segments whose label differs from the reference's.
+   (:meth:`~guardrail_core.extract.classify.crop_classifier.GuardrailClassifier.shape_decides`),
+   with the number of segments whose label differs from the reference's.
 """
 
 from __future__ import annotations
@@ -45,20 +45,20 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from guardrail_core.extract.backbone import (  # noqa: E402
+from guardrail_core.extract.classify.backbone import (  # noqa: E402
     CropEmbedder,
     load_backbone,
     normalise,
     pooled_features,
 )
-from guardrail_core.extract.cnn_runtime import (  # noqa: E402
+from guardrail_core.extract.classify.cnn_runtime import (  # noqa: E402
     BATCH_SIZE,
     CropNetwork,
     export_onnx,
     onnx_runtime_installed,
 )
-from guardrail_core.extract.crop_classifier import GuardrailClassifier  # noqa: E402
-from guardrail_core.extract.model_folder import DEFAULT_MODEL_DIR, load_model  # noqa: E402
+from guardrail_core.extract.classify.crop_classifier import GuardrailClassifier  # noqa: E402
+from guardrail_core.extract.classify.model_folder import DEFAULT_MODEL_DIR, load_model  # noqa: E402
 
 Embed = Callable[[np.ndarray], np.ndarray]  # (B, S, S, 3) uint8 -> (B, 1280) float32
 

@@ -35,7 +35,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from guardrail_core.extract.classify import ClassifierParams, train_classifier  # noqa: E402
+from guardrail_core.extract.classify.crop_classifier_params import ClassifierParams  # noqa: E402
+from guardrail_core.extract.classify.crop_classifier_training import train_classifier  # noqa: E402
 from guardrail_core.extract.crops import CROP_OK  # noqa: E402
 from guardrail_core.extract.lattice import build_lattice  # noqa: E402
 from guardrail_core.extract.pipeline import extract, segment_crops, slice_drive  # noqa: E402

@@ -34,7 +34,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from guardrail_core.cli.common import process_params  # noqa: E402
-from guardrail_core.extract.model_folder import DEFAULT_MODEL_DIR, load_model  # noqa: E402
+from guardrail_core.extract.classify.model_folder import DEFAULT_MODEL_DIR, load_model  # noqa: E402
 from guardrail_core.formats.drive import load_drive  # noqa: E402
 from guardrail_core.formats.run_folder import load_run  # noqa: E402
 from guardrail_core.importers.kitti import import_kitti  # noqa: E402

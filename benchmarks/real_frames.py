@@ -45,7 +45,7 @@ from guardrail_core.evaluate.labelled_frames import (  # noqa: E402
     off_guardrail_share,
     rail_metres,
 )
-from guardrail_core.extract.model_folder import DEFAULT_MODEL_DIR, load_model  # noqa: E402
+from guardrail_core.extract.classify.model_folder import DEFAULT_MODEL_DIR, load_model  # noqa: E402
 from guardrail_core.formats.drive import load_drive  # noqa: E402
 from guardrail_core.formats.run_folder import load_run  # noqa: E402
 from guardrail_core.importers.kitti import import_kitti  # noqa: E402

@@ -23,8 +23,8 @@ After each batch it fine-tunes exactly as the app's "Train" and "Activate" do
 (:func:`~guardrail_core.review.training.train_from_run` in fast mode on the reviewed labels and
 the run's corrected labels elsewhere, but for those an operator contradicted on their component
 (``--keep-contradicted`` keeps them), its segment head fine-tuned from MODEL's (``--fresh-head``
-draws it anew, as before 2026-11-29), then :func:`~guardrail_core.review.training.predict_run`
-and :func:`~guardrail_core.review.training.write_predictions`), and measures guardrail F (after
+draws it anew, as before 2026-11-29), then :func:`~guardrail_core.review.predictions.predict_run`
+and :func:`~guardrail_core.review.predictions.write_predictions`), and measures guardrail F (after
 label correction) on the rest of the street: every segment the oracle has not labelled yet,
 counted per segment (``guardrail_f1``) and per point (``guardrail_f1_points``: a segment weighs
 its points, so tiny segments, which the queue leaves out, count for little).
@@ -64,19 +64,16 @@ from guardrail_core.evaluate.labelled_frames import (  # noqa: E402
     off_guardrail_share,
     rail_metres,
 )
-from guardrail_core.extract.classify import ClassifierParams  # noqa: E402
-from guardrail_core.extract.crop_classifier import GuardrailClassifier  # noqa: E402
-from guardrail_core.extract.model_folder import DEFAULT_MODEL_DIR, load_model  # noqa: E402
+from guardrail_core.extract.classify.crop_classifier import GuardrailClassifier  # noqa: E402
+from guardrail_core.extract.classify.crop_classifier_params import ClassifierParams  # noqa: E402
+from guardrail_core.extract.classify.model_folder import DEFAULT_MODEL_DIR, load_model  # noqa: E402
 from guardrail_core.extract.segment_truth import segment_truth  # noqa: E402
 from guardrail_core.formats.drive import open_drive  # noqa: E402
 from guardrail_core.formats.run_folder import load_run  # noqa: E402
 from guardrail_core.process import process_drive_folder  # noqa: E402
+from guardrail_core.review.predictions import predict_run, write_predictions  # noqa: E402
 from guardrail_core.review.queue import queue_order, segment_queue_scores  # noqa: E402
-from guardrail_core.review.training import (  # noqa: E402
-    predict_run,
-    train_from_run,
-    write_predictions,
-)
+from guardrail_core.review.training import train_from_run  # noqa: E402
 
 GOAL_F = 0.98
 GOAL_LABELS = 100
@@ -238,7 +235,8 @@ def main() -> int:
         "--keep-contradicted",
         action="store_true",
         help="train on the model's labels an operator contradicted on their component too "
-        "(as before 2026-11-28; see contradicted_labels in guardrail_core/review/training.py)",
+        "(as before 2026-11-28; see contradicted_labels in "
+        "guardrail_core/review/training_labels.py)",
     )
     parser.add_argument(
         "--fresh-head",

@@ -19,10 +19,10 @@ from pathlib import Path
 
 import numpy as np
 
-from guardrail_core.extract.classify import classification_metrics
-from guardrail_core.extract.correct import correct_labels
+from guardrail_core.extract.classify.crop_classifier_training import classification_metrics
+from guardrail_core.extract.classify.label_correction import correct_labels
+from guardrail_core.extract.classify.model_folder import load_model
 from guardrail_core.extract.crops import CROP_OK
-from guardrail_core.extract.model_folder import load_model
 from guardrail_core.extract.pipeline import ExtractionParams, extract, segment_crops
 from guardrail_core.extract.segment_truth import segment_truth
 from guardrail_core.formats.drive import load_drive

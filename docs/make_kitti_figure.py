@@ -22,7 +22,7 @@ import numpy as np
 import trimesh
 from matplotlib.collections import PolyCollection
 
-from guardrail_core.extract.model_folder import DEFAULT_MODEL_DIR, load_model
+from guardrail_core.extract.classify.model_folder import DEFAULT_MODEL_DIR, load_model
 from guardrail_core.formats.drive import load_drive
 from guardrail_core.formats.run_folder import load_run
 from guardrail_core.importers.kitti import import_kitti

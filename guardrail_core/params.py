@@ -23,7 +23,7 @@ import math
 import typing
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, ClassVar, TypeVar
+from typing import Any, TypeVar
 
 from guardrail_core.errors import InvalidOptionError
 
@@ -41,6 +41,17 @@ class ParameterError(InvalidOptionError):
 
 
 @dataclass(frozen=True)
+class Slider:
+    """How the review app offers a parameter on a slider: its label, and the part of the
+    allowed range worth sliding through (a test checks it lies within that range)."""
+
+    label: str
+    low: float
+    high: float
+    step: float
+
+
+@dataclass(frozen=True)
 class ParamSpec:
     """What a parameter field allows (read from the metadata :func:`param` stores)."""
 
@@ -53,6 +64,7 @@ class ParamSpec:
     choices: tuple[Any, ...] | None
     finite: bool
     doc: str
+    slider: Slider | None
 
     def range_text(self) -> str:
         """The allowed range as text, e.g. ``(0, 0.5] m``."""
@@ -86,9 +98,11 @@ def param(
     choices: Sequence[Any] | None = None,
     finite: bool = True,
     doc: str = "",
+    slider: Slider | None = None,
 ) -> Any:
     """A parameter field: its default, unit and allowed range (``ge``/``gt`` below, ``le``/``lt``
-    above; ``choices`` for strings). ``finite=False`` lets a float be infinite ("no limit")."""
+    above; ``choices`` for strings). ``finite=False`` lets a float be infinite ("no limit");
+    ``slider`` puts it on the review app's tuning panel."""
     metadata = {
         "unit": unit,
         "ge": ge,
@@ -98,6 +112,7 @@ def param(
         "choices": tuple(choices) if choices is not None else None,
         "finite": finite,
         "doc": doc,
+        "slider": slider,
     }
     return dataclasses.field(default=default, metadata=metadata)
 
@@ -107,11 +122,8 @@ class StageParams:
     """Base of every stage's parameters: validated once, at construction.
 
     Subclasses declare fields with :func:`param` and may add cross-field rules in
-    :meth:`check_relations`. ``renamed`` maps names used by earlier versions to today's, so that
-    parameters saved in older run folders still load.
+    :meth:`check_relations`.
     """
-
-    renamed: ClassVar[Mapping[str, str]] = {}
 
     def __post_init__(self) -> None:
         hints = _type_hints(type(self))
@@ -143,8 +155,7 @@ class StageParams:
 
     @classmethod
     def from_json(cls: type[P], data: Mapping[str, Any]) -> P:
-        """Parameters from :meth:`to_json` output; missing names keep their defaults, names of
-        earlier versions (``renamed``) are read as today's.
+        """Parameters from :meth:`to_json` output; missing names keep their defaults.
 
         Raises
         ------
@@ -156,16 +167,15 @@ class StageParams:
         names = {f.name: f for f in dataclasses.fields(cls)}
         values: dict[str, Any] = {}
         for key, value in data.items():
-            name = cls.renamed.get(key, key)
-            if name not in names:
+            if key not in names:
                 raise ParameterError(
                     f"unknown parameter {cls.__name__}.{key} (known: {', '.join(sorted(names))})"
                 )
-            values[name] = value
+            values[key] = value
         return cls(**values)
 
 
-_SPEC_KEYS = ("unit", "ge", "gt", "le", "lt", "choices", "finite", "doc")
+_SPEC_KEYS = ("unit", "ge", "gt", "le", "lt", "choices", "finite", "doc", "slider")
 
 
 _HINTS: dict[type, dict[str, Any]] = {}
@@ -274,10 +284,10 @@ def apply_settings(
     """``params`` (a frozen dataclass whose fields are ``stages``, each a :class:`StageParams`)
     with ``STAGE.NAME=VALUE`` settings applied (the CLI's ``--set``).
 
-    NAME is a field of the stage's parameters (or a name of an earlier version); VALUE is read as
-    the field's type: an integer, a number, ``true``/``false``, text, or JSON for a tuple. Each
-    stage is checked once, after all its settings, so their order does not matter. ``what``
-    names the parameters in errors (``"reconstruction"``).
+    NAME is a field of the stage's parameters; VALUE is read as the field's type: an integer, a
+    number, ``true``/``false``, text, or JSON for a tuple. Each stage is checked once, after all
+    its settings, so their order does not matter. ``what`` names the parameters in errors
+    (``"reconstruction"``).
 
     Raises
     ------
@@ -296,7 +306,6 @@ def apply_settings(
                 f"unknown {what} stage {stage!r} in {setting!r} (known: {', '.join(stages)})"
             )
         kind = stages[stage]
-        name = kind.renamed.get(name, name)
         hints = typing.get_type_hints(kind)
         names = [f.name for f in dataclasses.fields(kind)]
         if name not in names:

@@ -42,9 +42,9 @@ def drive(drive_path: Path) -> Drive:
 @pytest.fixture(scope="session")
 def model_path(drive_path: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A fast-mode classifier trained on the test drive's truth."""
-    from guardrail_core.extract.classify import ClassifierParams
-    from guardrail_core.extract.model_folder import save_model
-    from guardrail_core.extract.training import train_from_drives
+    from guardrail_core.extract.classify.crop_classifier_params import ClassifierParams
+    from guardrail_core.extract.classify.model_folder import save_model
+    from guardrail_core.extract.classify.model_training import train_from_drives
 
     out = tmp_path_factory.mktemp("models") / "fast"
     save_model(train_from_drives([drive_path], params=ClassifierParams(mode="fast")), out)
@@ -54,7 +54,7 @@ def model_path(drive_path: Path, tmp_path_factory: pytest.TempPathFactory) -> Pa
 @pytest.fixture(scope="session")
 def run_path(drive: Drive, model_path: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The test drive processed with :func:`model_path`."""
-    from guardrail_core.extract.model_folder import load_model
+    from guardrail_core.extract.classify.model_folder import load_model
     from guardrail_core.process import process_drive
 
     out = tmp_path_factory.mktemp("runs") / "run"

@@ -20,15 +20,15 @@ import pytest
 
 from guardrail_core.cli import main
 from guardrail_core.export.run_export import load_export_source
+from guardrail_core.extract.classify.model_folder import DEFAULT_MODEL_DIR, load_model
 from guardrail_core.extract.crops import CROP_OK, CropParams, crop_window, cut_crop
-from guardrail_core.extract.model_folder import DEFAULT_MODEL_DIR, load_model
 from guardrail_core.formats.drive import Drive, load_drive
 from guardrail_core.formats.run_folder import Run, load_run
 from guardrail_core.importers.kitti import import_kitti
 from guardrail_core.process import process_drive
 from guardrail_core.review.run_crops import read_crops
+from tests.export.test_export_opendrive import Reader, _check_objects
 from tests.kitti_data import KITTI_RAW, KITTI_SEQ01, require_kitti
-from tests.test_export_opendrive import Reader, _check_objects
 
 ROAD_Z_M = -1.72
 WINDOW_M = 40.0

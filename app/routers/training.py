@@ -32,7 +32,7 @@ def post_train(session: Session, jobs: Jobs, body: TrainBody | None = None) -> d
     Segments an operator labelled take the operator's label; with ``include_unreviewed`` the
     others take the run's corrected label, but for those labelled otherwise than an operator
     labelled a segment of their component, which are left out
-    (:func:`guardrail_core.review.training.contradicted_labels`).
+    (:func:`guardrail_core.review.training_labels.contradicted_labels`).
     """
     body = body or TrainBody()
     work = review_jobs.fine_tune(
@@ -90,8 +90,8 @@ def get_models(session: Session) -> dict[str, Any]:
 )
 def post_activate(session: Session, version: str) -> dict[str, Any]:
     """Re-predict the run with this model and make it the active one (409, the run unchanged,
-    when the model reads segment features the run does not hold: a run processed before chains
-    and a model trained since)."""
+    when the model cannot read the run's segment features: a run processed by another version
+    of guardrail)."""
     try:
         return review_jobs.activate(session, version)
     except UnknownModelError as exc:

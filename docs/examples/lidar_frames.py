@@ -18,11 +18,12 @@ point was measured). Usage (docs/import.md)::
         --out drives/pandar64
     .venv/bin/guardrail import lidar lidar_frames/os1/os1_000001.las --out drives/os1
 
-The tests (tests/test_import_lidar.py) import these frames.
+The tests (tests/importers/test_import_lidar.py) import these frames.
 """
 
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 from pathlib import Path
@@ -133,7 +134,9 @@ def write_os1_frame(root: Path) -> dict:
 
 
 def main(argv: list[str]) -> int:
-    out = Path(argv[0] if argv else "lidar_frames")
+    parser = argparse.ArgumentParser(description="Write example frames of two spinning LiDARs.")
+    parser.add_argument("out", nargs="?", default="lidar_frames", help="folder to write into")
+    out = Path(parser.parse_args(argv).out)
     write_pandar64_frame(out / "pandar64")
     write_os1_frame(out / "os1")
     print(f"wrote a Pandar64 PCD frame with its camera and an OS1-128 LAS frame into {out}")

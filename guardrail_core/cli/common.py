@@ -75,7 +75,7 @@ def las_options() -> argparse.ArgumentParser:
     """``--las`` of the commands that write a drive folder."""
     parser = options_parser()
     parser.add_argument(
-        "--las", action="store_true", help="write uncompressed points.las instead of points.laz"
+        "--las", action="store_true", help="write the point tiles uncompressed (.las, not .laz)"
     )
     return parser
 

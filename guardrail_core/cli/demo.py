@@ -49,9 +49,9 @@ def run(args: argparse.Namespace) -> int:
 
     from guardrail_core.cli.train import held_out_report
     from guardrail_core.evaluate.detection import evaluate_run, format_report
-    from guardrail_core.extract.classify import ClassifierParams
-    from guardrail_core.extract.model_folder import save_model
-    from guardrail_core.extract.training import train_from_drives
+    from guardrail_core.extract.classify.crop_classifier_params import ClassifierParams
+    from guardrail_core.extract.classify.model_folder import save_model
+    from guardrail_core.extract.classify.model_training import train_from_drives
     from guardrail_core.formats.drive import drive_parts
     from guardrail_core.formats.run_folder import load_run
     from guardrail_core.process import process_drive

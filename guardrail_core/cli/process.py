@@ -98,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
         if client is not None:
             model_arg = None if args.model is None else str(args.model.resolve())
             warming = on_every_worker(client, "guardrail_core.process.tile_task:warm_up", model_arg)
-        from guardrail_core.extract.model_folder import DEFAULT_MODEL_DIR, load_model
+        from guardrail_core.extract.classify.model_folder import DEFAULT_MODEL_DIR, load_model
         from guardrail_core.process import DEFAULT_MARGIN_M, process_drive_folder
 
         model_dir = args.model or DEFAULT_MODEL_DIR

@@ -10,8 +10,9 @@ from typing import TYPE_CHECKING
 from guardrail_core.cli import common
 
 if TYPE_CHECKING:
-    from guardrail_core.extract.classify import ClassifierParams, GuardrailClassifier
-    from guardrail_core.extract.segment_head import SegmentHeadParams
+    from guardrail_core.extract.classify.crop_classifier import GuardrailClassifier
+    from guardrail_core.extract.classify.crop_classifier_params import ClassifierParams
+    from guardrail_core.extract.classify.segment_head import SegmentHeadParams
 
 
 def add_parser(subparsers: common.Subparsers) -> None:
@@ -97,10 +98,10 @@ def add_parser(subparsers: common.Subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from guardrail_core.extract.classify import ClassifierParams
-    from guardrail_core.extract.model_folder import save_model
-    from guardrail_core.extract.segment_head import SegmentHeadParams
-    from guardrail_core.extract.training import train_from_drives
+    from guardrail_core.extract.classify.crop_classifier_params import ClassifierParams
+    from guardrail_core.extract.classify.model_folder import save_model
+    from guardrail_core.extract.classify.model_training import train_from_drives
+    from guardrail_core.extract.classify.segment_head import SegmentHeadParams
     from guardrail_core.formats.atomic import check_output
     from guardrail_core.formats.drive import drive_parts
 
@@ -179,7 +180,7 @@ def _start_model(
     the review app would start from (the model that made the run, found by its version among
     the shipped default model and the models fine-tuned in ``review_dir``); None for a new
     head (``--fresh-head``, or that model's folder not at hand, which is said)."""
-    from guardrail_core.extract.model_folder import load_model
+    from guardrail_core.extract.classify.model_folder import load_model
     from guardrail_core.review.model_lineage import (
         FINE_TUNED_MODELS_DIR,
         fine_tuned_models,

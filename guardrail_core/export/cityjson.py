@@ -17,9 +17,9 @@ model tools (cjio, QGIS, 3DCityDB, citygml-tools; https://www.cityjson.org/specs
     then each pole's axis from its ground point to its top (so a run of one pole has a line too).
     Lines, not a box per pole: citygml4j turns a LOD1 ``MultiSurface`` into one solid.
 
-* attributes (:data:`ROW_ATTRIBUTES`, from the inventory row,
-  :func:`guardrail_core.reconstruct.inventory.inventory_rows`; a value the row lacks is left out,
-  not written as null): ``function``, ``status``, ``guardrail_type`` ("pipe", "beam" or
+* attributes (:data:`ROW_ATTRIBUTES`, from the run's inventory row,
+  :class:`~guardrail_core.reconstruct.inventory_row.InventoryRow`; a value the row lacks is left
+  out, not written as null): ``function``, ``status``, ``guardrail_type`` ("pipe", "beam" or
   "unknown"), ``signature`` (the design, e.g. ``beam h0.35 d0.085 y0.43-0.78``), ``height_m``,
   ``rail_top_m``, ``pole_count``, ``pole_spacing_m`` (median), ``length_m``, ``run_id``, and
   ``source_drive`` (the drive folder's name).
@@ -43,7 +43,7 @@ from __future__ import annotations
 
 import json
 import re
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -54,6 +54,7 @@ import trimesh
 from guardrail_core.errors import ExportError
 from guardrail_core.export.run_export import ExportSource, load_export_source
 from guardrail_core.formats.atomic import atomic_write, check_output
+from guardrail_core.reconstruct.inventory_row import InventoryRow
 from guardrail_core.reconstruct.model import Pole
 
 CITYJSON_VERSION = "2.0"
@@ -63,17 +64,17 @@ SCALE_M = 0.001
 FUNCTION = "guardrail"
 #: The city object id of run ``run_id``.
 OBJECT_ID = "guardrail-run-{run_id:03d}"
-#: (attribute, inventory row key) of the attributes taken from the run's inventory row.
-ROW_ATTRIBUTES = (
-    ("status", "status"),
-    ("guardrail_type", "type"),
-    ("signature", "signature"),
-    ("height_m", "height_m"),
-    ("rail_top_m", "rail_top_m"),
-    ("pole_count", "pole_count"),
-    ("pole_spacing_m", "pole_spacing_m"),
-    ("length_m", "length_m"),
-    ("run_id", "run_id"),
+#: (attribute, its value in the run's inventory row) of the attributes taken from the row.
+ROW_ATTRIBUTES: tuple[tuple[str, Callable[[InventoryRow], Any]], ...] = (
+    ("status", lambda row: row.status),
+    ("guardrail_type", lambda row: row.type),
+    ("signature", lambda row: row.signature),
+    ("height_m", lambda row: row.height_m),
+    ("rail_top_m", lambda row: row.rail_top_m),
+    ("pole_count", lambda row: row.pole_count),
+    ("pole_spacing_m", lambda row: row.pole_spacing_m),
+    ("length_m", lambda row: row.length_m),
+    ("run_id", lambda row: row.run_id),
 )
 _EPSG = re.compile(r"EPSG:(\d+)", re.IGNORECASE)
 
@@ -203,7 +204,7 @@ def cityjson_document(source: ExportSource, reference_system: str) -> tuple[dict
     drafts: list[tuple[str, dict[str, Any], list[_Geometry]]] = []
     for run, row in zip(source.runs, source.rows, strict=True):
         geometries = []
-        if row["status"] == "reconstructed":
+        if row.status == "reconstructed":
             surfaces, dropped = _surfaces(source.parts(run).values())
             counts["degenerate_triangles"] += dropped
             if surfaces is not None:
@@ -217,7 +218,8 @@ def cityjson_document(source: ExportSource, reference_system: str) -> tuple[dict
         counts["objects"] += 1
         counts["lod2_objects" if geometries[0].lod == "2" else "lod1_only_objects"] += 1
         attributes: dict[str, Any] = {"function": FUNCTION}
-        attributes.update((name, row[key]) for name, key in ROW_ATTRIBUTES if row[key] is not None)
+        values = ((name, value_of(row)) for name, value_of in ROW_ATTRIBUTES)
+        attributes.update((name, value) for name, value in values if value is not None)
         attributes["source_drive"] = source.drive_name
         drafts.append((OBJECT_ID.format(run_id=run.run_id), attributes, geometries))
 

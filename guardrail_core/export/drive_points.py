@@ -2,9 +2,8 @@
 tile at a time.
 
 The export needs the drive's CRS, origin and point files and nothing else, so it reads
-``drive.json`` and the tile index (``points/index.json``, drive format 2.x; a format 1.x drive's
-one points file counts as one tile) rather than opening the whole drive with ``open_drive``,
-which would also demand the trajectory, cameras and images.
+``drive.json`` and the tile index (``points/index.json``, drive format 2.x) rather than opening
+the whole drive with ``open_drive``, which would also demand the trajectory, cameras and images.
 """
 
 from __future__ import annotations
@@ -17,9 +16,9 @@ import laspy
 import numpy as np
 
 from guardrail_core.errors import DriveDimensionError, DriveFormatError, MissingDriveFileError
-from guardrail_core.formats.drive import FORMAT_NAME, READS_MAJOR
+from guardrail_core.formats.drive import FORMAT_NAME, check_format_version
 from guardrail_core.formats.drive_tiles import read_tile_index
-from guardrail_core.io.las import LAS_READ_ERRORS, read_header_summary
+from guardrail_core.io.las import LAS_READ_ERRORS
 
 
 @dataclass(frozen=True)
@@ -72,12 +71,7 @@ def read_drive_points(root: Path) -> DrivePoints:
         raise DriveFormatError(f"{path}: not valid JSON ({exc})") from exc
     if not isinstance(meta, dict) or meta.get("format") != FORMAT_NAME:
         raise DriveFormatError(f"{path}: not a {FORMAT_NAME} description")
-    major = str(meta.get("format_version")).split(".")[0]
-    if major not in READS_MAJOR:
-        raise DriveFormatError(
-            f"{path}: format_version {meta.get('format_version')} is not readable by this "
-            f"version (reads {', '.join(m + '.x' for m in READS_MAJOR)})"
-        )
+    check_format_version(meta, path)
     try:
         crs = str(meta["crs"])
         origin = np.asarray(meta["origin"], np.float64)
@@ -86,16 +80,10 @@ def read_drive_points(root: Path) -> DrivePoints:
         raise DriveFormatError(f"{path}: lacks the key or value {exc}") from exc
     if origin.shape != (3,) or not np.all(np.isfinite(origin)):
         raise DriveFormatError(f"{path}: origin must be three finite numbers")
-    files: tuple[PointFile, ...]
-    if major == "1":
-        if not (root / points).is_file():
-            raise MissingDriveFileError(f"{root}: point cloud {points!r} is missing")
-        files = (PointFile(root / points, read_header_summary(root / points)[0]),)
-    else:
-        index = read_tile_index(root, points)
-        if not index.tiles:
-            raise DriveFormatError(f"{root / points}: lists no tiles")
-        files = tuple(PointFile(root / t.file, t.points) for t in index.tiles)
+    index = read_tile_index(root, points)
+    if not index.tiles:
+        raise DriveFormatError(f"{root / points}: lists no tiles")
+    files = tuple(PointFile(root / t.file, t.points) for t in index.tiles)
     for file in files:  # before any work, not after an hour of it
         if not file.path.is_file():
             raise MissingDriveFileError(

@@ -10,15 +10,14 @@ dimensions (documented in ``docs/run-folder.md``, *Exporting to LAS*):
 * ``guardrail_probability`` (float32): the segment's probability of guardrail; -1 without one
 * ``run_id`` (int32): the reconstructed guardrail run of a guardrail point; -1 if none
 
-The drive's point tiles (``points/index.json``; a format 1.x drive's one points file) are read
-as they are and converted to LAS 1.4 point format 6 (7 or 8 when they have colours or near
-infrared), so every dimension they had (GPS time, intensity, returns, flags, the scan lattice,
-colours) is kept. A survey-scale drive does not fit in memory, so the export goes tile by tile,
-twice: once for the guardrail points (the runs are grouped over all of them) and the check that
-the run was made from this drive, once to convert and append each tile to the output. The output
-is written to a hidden file beside ``OUT`` and renamed when complete
-(:func:`guardrail_core.formats.atomic.atomic_file`); it may never be one of the files the export
-reads.
+The drive's point tiles (``points/index.json``) are read as they are and converted to LAS 1.4
+point format 6 (7 or 8 when they have colours or near infrared), so every dimension they had
+(GPS time, intensity, returns, flags, the scan lattice, colours) is kept. A survey-scale drive
+does not fit in memory, so the export goes tile by tile, twice: once for the guardrail points (the
+runs are grouped over all of them) and the check that the run was made from this drive, once to
+convert and append each tile to the output. The output is written to a hidden file beside
+``OUT`` and renamed when complete (:func:`guardrail_core.formats.atomic.atomic_file`); it may
+never be one of the files the export reads.
 """
 
 from __future__ import annotations

@@ -228,8 +228,9 @@ def opendrive_document(source: ExportSource) -> OpenDriveDocument:
         placed = line.project(points[:, :2])
         z_offset = points[:, 2] - elevation(placed.s)
         if len(points) >= MIN_POLES:
-            height = row["rail_top_m"] if row["rail_top_m"] is not None else row["height_m"]
-            objects.append(_barrier(len(objects) + 1, run, placed, z_offset, float(height)))
+            height = row.rail_top_m if row.rail_top_m is not None else row.height_m
+            assert height is not None  # a run with poles has a height
+            objects.append(_barrier(len(objects) + 1, run, placed, z_offset, height))
             barriers += 1
         for k, pole in enumerate(run.poles):
             pole_attributes = {

@@ -40,6 +40,7 @@ from pyproj.exceptions import ProjError
 from guardrail_core.errors import ExportError
 from guardrail_core.export.run_export import load_export_source
 from guardrail_core.formats.atomic import atomic_write, check_output
+from guardrail_core.reconstruct.inventory_row import InventoryRow
 
 OSM_API_VERSION = "0.6"
 GENERATOR = "guardrail export"
@@ -205,16 +206,17 @@ def _lon_lat(
     )
 
 
-def _way_tags(row: dict) -> dict[str, str]:
+def _way_tags(row: InventoryRow) -> dict[str, str]:
     """The tags of a run's way from its inventory row (see the module docstring)."""
+    assert row.height_m is not None  # a run with poles (a way) has a height
     tags = {
         "barrier": "guard_rail",
-        "height": f"{round(float(row['height_m']), HEIGHT_DECIMALS):g}",
+        "height": f"{round(row.height_m, HEIGHT_DECIMALS):g}",
     }
-    if row["status"] == "reconstructed":
+    if row.status == "reconstructed":
         # A run of poles only has no rails to tell its type or material by.
         tags["material"] = MATERIAL
-        tags["guard_rail:type"] = GUARD_RAIL_TYPE[row["type"]]
+        tags["guard_rail:type"] = GUARD_RAIL_TYPE[row.type]
     tags["source"] = SOURCE
-    tags[RUN_ID_KEY] = str(row["run_id"])
+    tags[RUN_ID_KEY] = str(row.run_id)
     return tags

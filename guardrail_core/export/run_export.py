@@ -19,6 +19,7 @@ from guardrail_core.formats.drive import drive_parts, open_drive
 from guardrail_core.formats.run_folder_paths import RunFolder
 from guardrail_core.reconstruct.assemble import run_parts
 from guardrail_core.reconstruct.inventory import inventory_rows
+from guardrail_core.reconstruct.inventory_row import InventoryRow
 from guardrail_core.reconstruct.model import RunModel
 from guardrail_core.reconstruct.run_models import load_run_models
 from guardrail_core.reconstruct.sweep import SweepParams
@@ -51,7 +52,7 @@ class ExportSource:
     crs: str
     origin: np.ndarray
     runs: tuple[RunModel, ...]
-    rows: list[dict]
+    rows: list[InventoryRow]
     trajectory_time: np.ndarray
     trajectory_xyz: np.ndarray
     reference_height_m: float

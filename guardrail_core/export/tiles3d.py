@@ -58,6 +58,7 @@ from guardrail_core.errors import ExportError
 from guardrail_core.export.run_export import load_export_source
 from guardrail_core.formats.atomic import check_output, staged_folder
 from guardrail_core.io.meshes import run_file_stem
+from guardrail_core.reconstruct.inventory_row import InventoryRow
 
 TILESET_FILE = "tileset.json"
 ECEF_CRS = "EPSG:4978"
@@ -67,22 +68,23 @@ BOX_MARGIN_M = 0.001
 #: glTF's y-up to 3D Tiles' z-up (3D Tiles 1.1, "glTF transforms"): +90 degrees about x, so
 #: the glTF point (x, y, z) is the tile point (x, -z, y).
 Y_UP_TO_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
-#: The metadata class of a run tile: property id -> (inventory row key, 3D Tiles definition).
-RUN_PROPERTIES: dict[str, tuple[str, dict[str, Any]]] = {
+#: The metadata class of a run tile: property id -> (its value in the run's inventory row,
+#: 3D Tiles definition).
+RUN_PROPERTIES: dict[str, tuple[Callable[[InventoryRow], Any], dict[str, Any]]] = {
     "run_id": (
-        "run_id",
+        lambda row: row.run_id,
         {"type": "SCALAR", "componentType": "INT32", "required": True, "description": "Run id"},
     ),
     "type": (
-        "type",
+        lambda row: row.type,
         {"type": "STRING", "required": True, "description": "pipe, beam or unknown"},
     ),
     "signature": (
-        "signature",
+        lambda row: row.signature,
         {"type": "STRING", "description": "The rails' design: pipes (radius mm, height m) or beam"},
     ),
     "height": (
-        "height_m",
+        lambda row: row.height_m,
         {
             "type": "SCALAR",
             "componentType": "FLOAT64",
@@ -90,11 +92,11 @@ RUN_PROPERTIES: dict[str, tuple[str, dict[str, Any]]] = {
         },
     ),
     "pole_count": (
-        "pole_count",
+        lambda row: row.pole_count,
         {"type": "SCALAR", "componentType": "INT32", "required": True, "description": "Poles"},
     ),
     "length": (
-        "length_m",
+        lambda row: row.length_m,
         {
             "type": "SCALAR",
             "componentType": "FLOAT64",
@@ -327,7 +329,7 @@ def _run_tile(
     to_map: Callable[[np.ndarray], np.ndarray],
     run_id: int,
     parts: Mapping[str, trimesh.Trimesh],
-    row: Mapping[str, Any],
+    row: InventoryRow,
 ) -> _Tile:
     """The tile of run ``run_id``: its ``parts`` (local frame, vertex-coloured, each with
     faces) placed exactly in a frame at the centre of their box, ``row`` (its inventory row) as
@@ -393,11 +395,10 @@ def _box(low: np.ndarray, high: np.ndarray) -> list[float]:
     return [float(v) for v in np.concatenate([(low + high) / 2, np.diag(half).ravel()])]
 
 
-def _run_metadata(row: Mapping[str, Any]) -> dict:
+def _run_metadata(row: InventoryRow) -> dict:
     """The run tile's metadata entity; values the inventory lacks (None) are left out."""
-    properties = {
-        name: row[key] for name, (key, _) in RUN_PROPERTIES.items() if row[key] is not None
-    }
+    values = {name: value_of(row) for name, (value_of, _) in RUN_PROPERTIES.items()}
+    properties = {name: value for name, value in values.items() if value is not None}
     return {"class": "guardrail", "properties": properties}
 
 

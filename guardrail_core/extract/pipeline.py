@@ -9,7 +9,10 @@ from typing import Any
 import numpy as np
 
 from guardrail_core.errors import EmptyDriveError
-from guardrail_core.extract.correct import CorrectionParams, SegmentExtents
+from guardrail_core.extract.classify.label_correction_params import CorrectionParams
+from guardrail_core.extract.classify.segment_extents import SegmentExtents
+from guardrail_core.extract.classify.segment_scores import ClassifyParams
+from guardrail_core.extract.classify.shape_features import segment_features
 from guardrail_core.extract.crops import (
     CROP_NO_IMAGE,
     CROP_OK,
@@ -21,7 +24,6 @@ from guardrail_core.extract.crops import (
 from guardrail_core.extract.curbs import separate_curbs
 from guardrail_core.extract.lattice import build_lattice
 from guardrail_core.extract.road import OFF_ROAD, ROAD, RoadParams, remove_road
-from guardrail_core.extract.segment_scores import ClassifyParams
 from guardrail_core.extract.segments import (
     SegmentParams,
     Segments,
@@ -30,7 +32,6 @@ from guardrail_core.extract.segments import (
     summarise_segments,
     wireframe_components,
 )
-from guardrail_core.extract.shape_features import segment_features
 from guardrail_core.extract.slices import slice_components
 from guardrail_core.formats.drive import Drive
 from guardrail_core.formats.run_folder import POINT_OFF_ROAD, POINT_ROAD
@@ -99,7 +100,7 @@ class Extraction:
     segments : the sliced segments
     summary : their extents
     features : (S, SEGMENT_FEATURE_DIM) float32, shape and neighbour features
-        (:mod:`guardrail_core.extract.shape_features`)
+        (:mod:`guardrail_core.extract.classify.shape_features`)
     choice : chosen image and rectangle per segment
     """
 

@@ -4,8 +4,7 @@ Layout (documented in ``docs/drive-format.md``)::
 
     drive.json        format version, CRS, float64 local origin, scanner, file names
     points/           LAS 1.4 tiles along the trajectory (gps_time, intensity, extra dims
-                      rotation, phase) and their index.json (formats/drive_tiles.py); format 1.x
-                      drives hold one points.laz instead, read as one tile
+                      rotation, phase) and their index.json (formats/drive_tiles.py)
     trajectory.csv    time, x, y, z (map coordinates), roll, pitch, yaw (radians)
     cameras.json      intrinsics, Brown-Conrady distortion, T_vehicle_camera per camera
     images.json       one record per image: file, camera, gps_time, T_world_camera (map frame)
@@ -25,7 +24,6 @@ from __future__ import annotations
 import csv
 import dataclasses
 import json
-import math
 import os
 import warnings
 from collections.abc import Sequence
@@ -42,20 +40,17 @@ from guardrail_core.errors import (
     NonFiniteCoordinatesError,
     TimestampMismatchError,
 )
-from guardrail_core.formats.drive_tiles import (
-    TileIndex,
-    TileRecord,
-    read_tile_index,
-)
-from guardrail_core.io.las import read_header_summary, read_points
+from guardrail_core.formats.drive_tiles import INDEX_FILE, TileIndex, read_tile_index
+from guardrail_core.io.las import read_points
 from guardrail_core.sensors.camera import Camera
 from guardrail_core.sensors.scanner import ScannerParams
 from guardrail_core.sensors.trajectory import Trajectory
 
 FORMAT_NAME = "guardrail-drive"
 FORMAT_VERSION = "2.0"
-#: Major versions this reader reads: 1.x (one points file) and 2.x (tiles with an index).
-READS_MAJOR = ("1", "2")
+#: The major version this reader reads (its minors only add keys). 0.2.0, the first release, reads
+#: no 1.x drive (one points file, written before the point tiles): those are refused by name.
+READS_MAJOR = FORMAT_VERSION.split(".")[0]
 TRAJECTORY_COLUMNS = ("time", "x", "y", "z", "roll", "pitch", "yaw")
 
 
@@ -257,7 +252,7 @@ class DriveSource:
 
     Attributes
     ----------
-    tiles : the point tiles in time order (format 1.x drives: their one points file)
+    tiles : the point tiles in time order
     has_truth : the drive has truth (and truth was asked for)
     objects : ``truth/objects.json`` (synthetic drives; empty otherwise)
     """
@@ -367,11 +362,35 @@ class DriveSource:
 _CLOUD_FIELDS = ("xyz", "gps_time", "intensity", "rotation", "phase")
 
 
+def check_format_version(meta: dict, path: Path) -> None:
+    """Refuse a ``drive.json`` (``meta``, read from ``path``) of a major version other than
+    :data:`READS_MAJOR`.
+
+    Raises
+    ------
+    DriveFormatError
+        Saying what to do: an older drive (1.x) is imported or simulated again, a newer one needs
+        a newer version of guardrail.
+    """
+    version = str(meta.get("format_version"))
+    major = version.split(".")[0]
+    if major == READS_MAJOR:
+        return
+    if major.isdigit() and int(major) < int(READS_MAJOR):
+        hint = "import or simulate the drive again with this version of guardrail"
+    else:
+        hint = "it was written by a newer version of guardrail"
+    raise DriveFormatError(
+        f"{path}: format_version {version} is not readable by this version (reads "
+        f"{READS_MAJOR}.x); {hint}"
+    )
+
+
 def open_drive(root: str | os.PathLike, *, with_truth: bool = True) -> DriveSource:
     """Open and validate a drive folder, reading everything but its points.
 
-    Reads format 2.x (point tiles with ``points/index.json``) and 1.x (one points file, which
-    becomes one tile).
+    Reads format 2.x (point tiles with ``points/index.json``); other major versions are refused
+    (:func:`check_format_version`).
 
     Raises
     ------
@@ -385,13 +404,7 @@ def open_drive(root: str | os.PathLike, *, with_truth: bool = True) -> DriveSour
     meta = _read_json(root / "drive.json", "drive description")
     if not isinstance(meta, dict) or meta.get("format") != FORMAT_NAME:
         raise DriveFormatError(f"{root / 'drive.json'}: not a {FORMAT_NAME} description")
-    version = str(meta.get("format_version"))
-    major = version.split(".")[0]
-    if major not in READS_MAJOR:
-        raise DriveFormatError(
-            f"{root / 'drive.json'}: format_version {version} is not readable by this version "
-            f"(reads {', '.join(m + '.x' for m in READS_MAJOR)})"
-        )
+    check_format_version(meta, root / "drive.json")
     try:
         origin = _matrix(meta["origin"], (3,), "drive.json: origin")
         crs = str(meta["crs"])
@@ -404,10 +417,7 @@ def open_drive(root: str | os.PathLike, *, with_truth: bool = True) -> DriveSour
     trajectory = read_trajectory_csv(root / files["trajectory"], origin, reference_height)
     has_truth = bool(with_truth and meta.get("truth"))
     truth_dir = str(meta.get("truth") or "truth")
-    if major == "1":
-        tiles = _single_tile(root, files["points"], truth_dir, trajectory, has_truth)
-    else:
-        tiles = read_tile_index(root, files["points"])
+    tiles = read_tile_index(root, files["points"])
     t_lo, t_hi = trajectory.time[0], trajectory.time[-1]
 
     camera_list = _read_json(root / files["cameras"], "camera calibration")
@@ -452,26 +462,6 @@ def load_drive(root: str | os.PathLike, *, with_truth: bool = True) -> Drive:
     source = open_drive(root, with_truth=with_truth)
     points, truth = source.read_tiles(range(len(source.tiles)))
     return dataclasses.replace(source.drive(points, truth), tiles=source.tiles)
-
-
-def _single_tile(
-    root: Path, name: str, truth_dir: str, trajectory: Trajectory, has_truth: bool
-) -> TileIndex:
-    """The one points file of a format 1.x drive as a tile covering the whole drive (its count
-    and bounds are read from the LAS header alone)."""
-    path = _require(root / name, "point cloud")
-    count, lo, hi = read_header_summary(path)
-    times = (float(trajectory.time[0]), float(trajectory.time[-1]))
-    record = TileRecord(
-        file=name,
-        truth=f"{truth_dir}/points.npz" if has_truth else None,
-        gps_time=times,
-        station_m=(-math.inf, math.inf),  # unknown without reading the points: every window
-        bounds_min=lo,
-        bounds_max=hi,
-        points=count,
-    )
-    return TileIndex((record,))
 
 
 def _load_points(path: Path, origin: np.ndarray, scanner: ScannerParams) -> PointCloud:
@@ -550,7 +540,7 @@ def _mask_files(images: list[ImageRecord]) -> dict[str, str]:
 #: app's labels (``formats.label_store``), which no command may delete either.
 DRIVE_FOLDERS = ("points", "images", "truth", "review")
 _DEFAULT_FILES = {
-    "points": "points.laz",
+    "points": INDEX_FILE,
     "trajectory": "trajectory.csv",
     "cameras": "cameras.json",
     "images": "images.json",

@@ -6,7 +6,7 @@ scanned while the vehicle drove from one station to the next (``tile_m`` metres 
 count), so a reader of a window of stations opens only the tiles that window touches::
 
     points/index.json      {"format": "guardrail-tiles", "format_version": 1, "tiles": [...]}
-    points/000000.laz      LAS 1.4, one per tile (as ``points.laz`` was)
+    points/000000.laz      LAS 1.4, one per tile
     truth/points/000000.npz   synthetic drives: class and object id of every point of the tile
 
 A tile's ``station_m`` is the range of its points' stations (metres along the trajectory,

@@ -218,10 +218,9 @@ class ReconstructionFolder:
 
 
 def read_versioned_json(
-    path: Path, version: Any, mismatch: Callable[[Any], GuardrailError]
+    path: Path, version: int, mismatch: Callable[[Any], GuardrailError]
 ) -> dict[str, Any]:
-    """The JSON object in ``path``, whose ``format_version`` must be ``version`` (or one of them,
-    given a tuple).
+    """The JSON object in ``path``, whose ``format_version`` must be ``version``.
 
     Raises
     ------
@@ -235,8 +234,7 @@ def read_versioned_json(
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise RunFolderError(f"{path}: not valid JSON ({exc})") from exc
     found = data.get("format_version") if isinstance(data, dict) else None
-    accepted = version if isinstance(version, tuple) else (version,)
     # type() too: True == 1 and 3.0 == 3, but neither is a format version.
-    if not any(type(found) is type(v) and found == v for v in accepted):
+    if type(found) is not int or found != version:
         raise mismatch(found)
     return data

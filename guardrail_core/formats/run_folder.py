@@ -36,8 +36,6 @@ if TYPE_CHECKING:
 #: 4: no crops/ folder (a crop is cut from the drive's image when it is needed:
 #: :mod:`guardrail_core.review.run_crops`)
 RUN_FORMAT_VERSION = 4
-#: Versions read: a format 3 folder is a format 4 one with JPEGs of its crops, which go unused.
-RUN_FORMAT_VERSIONS_READ = (3, 4)
 #: The files of a run folder (their paths: :class:`guardrail_core.formats.run_folder_paths.RunFolder`).
 RUN_FILE = "run.json"
 POINTS_DIR = "points"
@@ -59,7 +57,7 @@ CROP_TOO_SMALL = 2
 CROP_STATUS_NAMES = {CROP_OK: "ok", CROP_NO_IMAGE: "no_image", CROP_TOO_SMALL: "too_small"}
 
 # Field name -> (dtype, trailing shape) of segments.npz; None: any width, the same for every row
-# (the shape features' count belongs to the extraction, extract/shape_features.py).
+# (the shape features' count belongs to the extraction, extract/classify/shape_features.py).
 SEGMENT_FIELDS: dict[str, tuple[str, tuple[int | None, ...]]] = {
     "component": ("int32", ()),
     "slice_index": ("int64", ()),

@@ -26,7 +26,7 @@ from guardrail_core.formats.run_folder import (
     EMBEDDINGS_FILE,
     POINTS_DIR,
     RUN_FILE,
-    RUN_FORMAT_VERSIONS_READ,
+    RUN_FORMAT_VERSION,
     SEGMENT_FIELDS,
     SEGMENTS_CSV,
     SEGMENTS_FILE,
@@ -127,13 +127,15 @@ class RunFolder:
                 f"{self.root}: not a run folder (no {RUN_FILE}); make one with "
                 "`guardrail process DRIVE --model MODEL --out RUN_DIR`"
             )
+        # One version only: 0.2.0, the first release, writes format 4; older folders came from
+        # versions never released (docs/deprecation.md).
         return read_versioned_json(
             self.run_file,
-            RUN_FORMAT_VERSIONS_READ,
+            RUN_FORMAT_VERSION,
             lambda found: RunFormatVersionError(
                 f"{self.run_file}: run format version {found!r}, this version of the tool "
-                f"reads {' and '.join(map(str, RUN_FORMAT_VERSIONS_READ))}; process the drive "
-                "again"
+                f"reads {RUN_FORMAT_VERSION} (written by guardrail 0.2.0 and later); process the "
+                "drive again with `guardrail process DRIVE --model MODEL --out RUN_DIR`"
             ),
         )
 

@@ -4,7 +4,7 @@
 reconstruction's summary); :meth:`guardrail_core.formats.run_folder_paths.RunFolder.info` reads it
 back, its format version checked. :meth:`RunInfo.to_json` gives the very keys run.json has::
 
-    {"format_version": 3, "created": "...", "drive": {"path", "points", "tiles"},
+    {"format_version": 4, "created": "...", "drive": {"path", "points", "tiles"},
      "model": {"version", "mode", "threshold"}, "params": {"road", "segments", "crops", "correction"},
      "counts": {...}, "images": [...], "reconstruction": {...} (optional),
      "predicted": {"at", "previous_model"} (optional, after a model was activated in the app),
@@ -158,7 +158,7 @@ class ModelRef:
 class CropCounts:
     """Segments by crop status (``segments.npz`` ``crop_status``: 0 ok, 1 no_image, 2 too_small),
     and ``asked``: the ok crops the CNN looked at (the others' label the shape decided;
-    :mod:`guardrail_core.extract.segment_scores`)."""
+    :mod:`guardrail_core.extract.classify.segment_scores`)."""
 
     ok: int
     no_image: int

@@ -17,7 +17,7 @@ from guardrail_core.errors import InvalidOptionError, SourceFormatError
 from guardrail_core.importers.calibration import mount_transform, read_structured_file
 from guardrail_core.importers.delivery_sources import PathLike
 from guardrail_core.params import ParameterError
-from guardrail_core.sensors.scanner import ScannerParams, scanner_mounting
+from guardrail_core.sensors.scanner import DRIVE_JSON_KEYS, ScannerParams, scanner_mounting
 
 #: A point is off the scanner's measurement grid when its time lies further than this (in
 #: measurement intervals) from the nearest pulse; more than OFF_GRID_NOTE_FRACTION such points
@@ -46,11 +46,12 @@ def scanner_params(fields: Mapping, first_gps_time: float, where: str = "scanner
     defaults to ``first_gps_time`` rounded down to a whole second: the epoch of a scanner whose
     mirror is synchronised to the GPS pulse per second (and whose rotations per second are whole).
     ``T_vehicle_scanner`` is 16 or 6 numbers (:func:`mount_transform`), default the simulator's
-    mount. ``range_noise_m``, ``min_range_m``, ``max_range_m`` default to ScannerParams'. The
-    names of drive format 1.0 and 1.1 (``rotations_per_second``, ``measurements_per_second``,
-    ``t0``) are read as today's.
+    mount. ``range_noise_m``, ``min_range_m``, ``max_range_m`` default to ScannerParams'.
+    ``drive.json``'s names of the rates and epoch (:data:`DRIVE_JSON_KEYS`:
+    ``rotations_per_second``, ``measurements_per_second``, ``t0``) are read too, so that a
+    drive's ``scanner`` block serves as a scanner file (:func:`read_scanner_file`).
     """
-    fields = {ScannerParams.renamed.get(key, key): value for key, value in fields.items()}
+    fields = {DRIVE_JSON_KEYS.get(key, key): value for key, value in fields.items()}
     kind = str(fields.get("kind", "profile"))
     if kind != "profile":
         raise SourceFormatError(

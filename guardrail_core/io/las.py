@@ -103,27 +103,3 @@ def read_points(path: Path, origin: np.ndarray) -> dict[str, np.ndarray]:
         if name in names:
             out[name] = np.asarray(las[name], np.int64)
     return out
-
-
-def read_header_summary(
-    path: Path,
-) -> tuple[int, tuple[float, float, float], tuple[float, float, float]]:
-    """Point count and map-coordinate bounds (min, max) from a LAS/LAZ header, without reading
-    the points.
-
-    Raises
-    ------
-    DriveFormatError
-        The file is not LAS.
-    """
-    try:
-        with laspy.open(str(path)) as reader:
-            header = reader.header
-            lo, hi = header.mins, header.maxs
-            return (
-                int(header.point_count),
-                (float(lo[0]), float(lo[1]), float(lo[2])),
-                (float(hi[0]), float(hi[1]), float(hi[2])),
-            )
-    except LAS_READ_ERRORS as exc:
-        raise DriveFormatError(f"{path}: not a readable LAS/LAZ file ({exc})") from exc

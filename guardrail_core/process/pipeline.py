@@ -37,7 +37,7 @@ from guardrail_core.errors import (
     ReconstructionError,
     TilesFailedError,
 )
-from guardrail_core.extract.classify import GuardrailClassifier
+from guardrail_core.extract.classify.crop_classifier import GuardrailClassifier
 from guardrail_core.extract.pipeline import ExtractionParams
 from guardrail_core.formats.atomic import staged_folder
 from guardrail_core.formats.drive import Drive, PointCloud, drive_parts, open_drive
@@ -185,7 +185,7 @@ def process_drive_folder(
     A tile that fails with a named error is recorded in ``run.json`` (``processing.tiles``) and
     its points get ``POINT_UNPROCESSED``; the rest of the drive completes.
     """
-    from guardrail_core.extract.model_folder import load_model
+    from guardrail_core.extract.classify.model_folder import load_model
 
     cluster = cluster or ClusterSpec()
     source = open_drive(drive_root, with_truth=False)

@@ -31,10 +31,10 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from guardrail_core.errors import GuardrailError
-from guardrail_core.extract.classify import GuardrailClassifier
-from guardrail_core.extract.correct import correct_labels, correction_reach_slices
+from guardrail_core.extract.classify.crop_classifier import GuardrailClassifier
+from guardrail_core.extract.classify.label_correction import correction_reach_slices
+from guardrail_core.extract.classify.score_and_correct import score_and_correct
 from guardrail_core.extract.pipeline import ExtractionParams, extract, segment_crops
-from guardrail_core.extract.segment_scores import score_segments, weighed_crop_probability
 from guardrail_core.formats.drive import Drive, DriveSource, open_drive
 from guardrail_core.formats.run_folder import (
     CROP_OK,
@@ -123,7 +123,7 @@ def warm_up(model: str | None) -> None:
     the cluster starts, while the command still starts up): the model folder ``model`` (None:
     the default model), the CNN's runtime session, and the reconstruction's modules."""
     import guardrail_core.reconstruct.pipeline  # noqa: F401  (open3d, trimesh)
-    from guardrail_core.extract.model_folder import DEFAULT_MODEL_DIR
+    from guardrail_core.extract.classify.model_folder import DEFAULT_MODEL_DIR
 
     classifier = _load_model(str(Path(model or DEFAULT_MODEL_DIR).resolve()))
     classifier.embed(np.zeros((1, classifier.input_size, classifier.input_size, 3), np.uint8))
@@ -136,7 +136,7 @@ def _open_source(path: str) -> DriveSource:
 
 @functools.lru_cache(maxsize=2)
 def _load_model(path: str) -> GuardrailClassifier:
-    from guardrail_core.extract.model_folder import load_model
+    from guardrail_core.extract.classify.model_folder import load_model
 
     return load_model(Path(path))
 
@@ -221,28 +221,21 @@ def process_window(
         crop_range_m=(tile.station_m[0] - reach, tile.station_m[1] + reach),
     )
     segments, choice = result.segments, result.choice
-    with timer.stage("classify", points=len(segments)):
-        # Only the crops the CNN is asked about are cut (the run keeps each segment's image and
-        # rectangle: the app and retraining cut the others when they need them).
-        scores = score_segments(
-            model,
-            result.features,
-            choice.status == CROP_OK,
-            lambda rows: segment_crops(window, choice, rows, model.input_size, params.crops),
-            params.classify,
-            progress=progress,
-        )
-        crop_probability, probability, raw_label = (
-            scores.crop_probability,
-            scores.probability,
-            scores.raw_label,
-        )
-        embeddings = scores.embeddings
-    with timer.stage("correction", points=len(segments)):
-        weighed = weighed_crop_probability(
-            model, result.features, crop_probability, params.classify.crop_probability_clip
-        )
-        label = correct_labels(raw_label, result.extents(), params.correction, probability, weighed)
+    # §3.3. Only the crops the CNN is asked about are cut (the run keeps each segment's image
+    # and rectangle: the app and retraining cut the others when they need them).
+    scores = score_and_correct(
+        model,
+        result.features,
+        choice.status == CROP_OK,
+        result.extents(),
+        lambda rows: segment_crops(window, choice, rows, model.input_size, params.crops),
+        params.classify,
+        params.correction,
+        timer=timer,
+        progress=progress,
+    )
+    crop_probability, probability = scores.crop_probability, scores.probability
+    raw_label, label, embeddings = scores.raw_label, scores.label, scores.embeddings
 
     with timer.stage("write", points=len(segments)):
         # A segment belongs to the tile that owns its slice (tile edges are slice edges).

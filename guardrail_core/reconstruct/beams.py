@@ -12,14 +12,12 @@ polyline and smoothed by Taubin's low-pass filter (:func:`reconstruct_beam`).
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import ClassVar
 
 import numpy as np
 
 from guardrail_core.errors import ReconstructionError
-from guardrail_core.params import StageParams, param
+from guardrail_core.params import Slider, StageParams, param
 from guardrail_core.reconstruct.pipes import check_unit_points
 from guardrail_core.reconstruct.smoothing import taubin_smooth
 
@@ -29,20 +27,6 @@ __all__ = ["BeamParams", "BeamReconstruction", "check_unit_length", "reconstruct
 @dataclass(frozen=True)
 class BeamParams(StageParams):
     """Thresholds of beam detection and section extraction (§4.4)."""
-
-    renamed: ClassVar[Mapping[str, str]] = {
-        "cell": "cell_m",
-        "band": "band_m",
-        "min_height": "min_height_m",
-        "max_gap": "max_gap_m",
-        "type_margin": "type_margin_m",
-        "pole_margin": "pole_margin_m",
-        "post_gap": "post_gap_m",
-        "slice_interval": "slice_interval_m",
-        "shadow_gap": "shadow_gap_m",
-        "max_band_gap": "max_band_gap_m",
-        "crest_depth": "crest_depth_m",
-    }
 
     # -- unit type: beams fill a relatively large rectangle (§4.4) --------------------------------
     cell_m: float = param(
@@ -170,7 +154,12 @@ class BeamParams(StageParams):
         "post or blockout points and are dropped.",
     )
     slice_interval_m: float = param(
-        0.01, unit="m", gt=0, le=0.2, doc="Height of the horizontal slices (§4.4: 10 mm)."
+        0.01,
+        unit="m",
+        gt=0,
+        le=0.2,
+        doc="Height of the horizontal slices (§4.4: 10 mm).",
+        slider=Slider("beam slice interval (m)", 0.005, 0.05, 0.005),
     )
     min_points: int = param(3, ge=1, doc="Points. Fewest points for a slice to give a centre.")
     shadow_gap_m: float = param(

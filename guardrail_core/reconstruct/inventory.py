@@ -1,6 +1,7 @@
 """The guardrail inventory: one row per run, as GeoJSON and CSV (Matsumoto et al. 2019, §4).
 
-A row says what was reconstructed (status, pipe or beam, the design's signature), how long and
+A row (:class:`~guardrail_core.reconstruct.inventory_row.InventoryRow`, where each field's unit
+is given) says what was reconstructed (status, pipe or beam, the design's signature), how long and
 high the run is, where its poles stand (count, spacing) and where it starts and ends in map
 coordinates (local + the drive's origin, float64). Lengths and spacings are 3-D distances between
 consecutive poles' ground points (along the ground); heights are above the ground line.
@@ -23,19 +24,11 @@ from typing import Any
 
 import numpy as np
 
-from guardrail_core.errors import InvalidOptionError, ReconstructionError
+from guardrail_core.errors import InvalidOptionError, ReconstructionError, RunFolderError
 from guardrail_core.formats.atomic import atomic_write
 from guardrail_core.params import StageParams, param
+from guardrail_core.reconstruct.inventory_row import ROW_KEYS, InventoryRow
 from guardrail_core.reconstruct.model import RunModel, UnitModel
-
-STATUSES = ("reconstructed", "poles only", "not reconstructed")
-#: The keys of a row, in the CSV's column order.
-ROW_KEYS = (
-    "run_id", "status", "type", "signature", "design", "length_m", "height_m", "rail_top_m",
-    "pole_count", "poles_seen", "pole_radius_m", "pole_spacing_m", "pole_spacing_min_m", "pole_spacing_max_m",
-    "start_x", "start_y", "start_z", "end_x", "end_y", "end_z",
-    "units", "units_registered", "units_superimposed", "n_points", "notes",
-)  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -130,30 +123,14 @@ def _model_top(model: UnitModel) -> float:
 
 def inventory_rows(
     runs: Sequence[RunModel], origin: np.ndarray, params: InventoryParams = InventoryParams()
-) -> list[dict]:
-    """One plain-JSON row per run.
+) -> list[InventoryRow]:
+    """One :class:`InventoryRow` per run, in the order of ``runs``.
 
     Parameters
     ----------
     runs : RunModel per run
     origin : (3,) float64, map coordinates of the local frame (``drive.json``)
     params : InventoryParams
-
-    Returns
-    -------
-    list of dict
-        Keys (:data:`ROW_KEYS`): ``run_id``; ``status`` ("reconstructed": a unit model with pipes or a beam section;
-        "poles only": poles but no such model; "not reconstructed": neither); ``type`` ("pipe" | "beam" | "unknown");
-        ``signature`` (text, see :func:`pipe_signature` / :func:`beam_signature`) and
-        ``design`` (structured: a list of pipes, or the beam's section summary; None);
-        ``length_m`` (sum of distances between consecutive poles); ``height_m`` (the highest of
-        the median pole height and the rails' top); ``rail_top_m``; ``pole_count``;
-        ``poles_seen`` (poles with points; the others were placed where one was missing);
-        ``pole_radius_m`` (median); ``pole_spacing_m`` (median) with ``pole_spacing_min_m`` and
-        ``pole_spacing_max_m``; ``start_x, start_y, start_z, end_x, end_y, end_z`` (first and last
-        pole's ground point, map coordinates, float64); ``units``; ``units_registered``;
-        ``units_superimposed``; ``n_points``; ``notes`` (the run's and the model's, "; "-joined).
-        Values missing for a run (no poles, no model) are None.
 
     References
     ----------
@@ -182,50 +159,51 @@ def inventory_rows(
         pole_height = float(np.median([p.height for p in run.poles])) if run.poles else None
         rail_top = _model_top(model) if model is not None else None
         heights = [h for h in (pole_height, rail_top) if h is not None]
-        start = positions[0] + o if len(positions) else [None] * 3
-        end = positions[-1] + o if len(positions) else [None] * 3
+        start = [float(v) for v in positions[0] + o] if len(positions) else [None] * 3
+        end = [float(v) for v in positions[-1] + o] if len(positions) else [None] * 3
         notes = list(run.notes) + (list(model.notes) if model is not None else [])
         rows.append(
-            {
-                "run_id": int(run.run_id),
-                "status": status,
-                "type": model.type if model is not None else "unknown",
-                "signature": signature,
-                "design": design,
-                "length_m": _round(spacing.sum(), 3) if len(positions) else None,
-                "height_m": _round(max(heights), 3) if heights else None,
-                "rail_top_m": _round(rail_top, 3) if rail_top is not None else None,
-                "pole_count": len(run.poles),
-                "poles_seen": sum(1 for p in run.poles if p.n_points > 0),
-                "pole_radius_m": (
+            InventoryRow(
+                run_id=int(run.run_id),
+                status=status,
+                type=model.type if model is not None else "unknown",
+                signature=signature,
+                design=design,
+                length_m=_round(spacing.sum(), 3) if len(positions) else None,
+                height_m=_round(max(heights), 3) if heights else None,
+                rail_top_m=_round(rail_top, 3) if rail_top is not None else None,
+                pole_count=len(run.poles),
+                poles_seen=sum(1 for p in run.poles if p.n_points > 0),
+                pole_radius_m=(
                     _round(np.median([p.radius for p in run.poles]), 4) if run.poles else None
                 ),
-                "pole_spacing_m": _round(np.median(spacing), 3) if len(spacing) else None,
-                "pole_spacing_min_m": _round(spacing.min(), 3) if len(spacing) else None,
-                "pole_spacing_max_m": _round(spacing.max(), 3) if len(spacing) else None,
-                **{f"start_{a}": _float(v) for a, v in zip("xyz", start, strict=True)},
-                **{f"end_{a}": _float(v) for a, v in zip("xyz", end, strict=True)},
-                "units": len(run.units),
-                "units_registered": int(np.count_nonzero(np.asarray(run.registered, bool))),
-                "units_superimposed": int(model.n_units) if model is not None else 0,
-                "n_points": int(run.n_points),
-                "notes": "; ".join(notes),
-            }
+                pole_spacing_m=_round(np.median(spacing), 3) if len(spacing) else None,
+                pole_spacing_min_m=_round(spacing.min(), 3) if len(spacing) else None,
+                pole_spacing_max_m=_round(spacing.max(), 3) if len(spacing) else None,
+                start_x=start[0],
+                start_y=start[1],
+                start_z=start[2],
+                end_x=end[0],
+                end_y=end[1],
+                end_z=end[2],
+                units=len(run.units),
+                units_registered=int(np.count_nonzero(np.asarray(run.registered, bool))),
+                units_superimposed=int(model.n_units) if model is not None else 0,
+                n_points=int(run.n_points),
+                notes="; ".join(notes),
+            )
         )
     return rows
 
 
-def _float(value) -> float | None:
-    return None if value is None else float(value)
-
-
 def inventory_geojson(
-    rows: Sequence[dict], runs: Sequence[RunModel], origin: np.ndarray, crs: str
+    rows: Sequence[InventoryRow], runs: Sequence[RunModel], origin: np.ndarray, crs: str
 ) -> dict:
     """The inventory as a GeoJSON FeatureCollection (a dict); see the module docstring.
 
-    Feature ``i`` has ``rows[i]`` as properties and the geometry of ``runs[i]``'s poles' ground
-    points + ``origin``, map coordinates in ``crs`` (float64, written at full precision).
+    Feature ``i`` has ``rows[i].to_record()`` as properties and the geometry of ``runs[i]``'s
+    poles' ground points + ``origin``, map coordinates in ``crs`` (float64, written at full
+    precision).
     """
     o = _origin(origin)
     if not isinstance(crs, str) or not crs:
@@ -234,9 +212,9 @@ def inventory_geojson(
         raise InvalidOptionError(f"{len(rows)} rows for {len(runs)} runs")
     features = []
     for row, run in zip(rows, runs, strict=True):
-        if row.get("run_id") != run.run_id:
+        if row.run_id != run.run_id:
             raise InvalidOptionError(
-                f"row of run {row.get('run_id')} paired with run {run.run_id}; keep their order"
+                f"row of run {row.run_id} paired with run {run.run_id}; keep their order"
             )
         pts = np.array([np.asarray(p.position, np.float64) for p in run.poles]).reshape(-1, 3) + o
         coords = pts.tolist()
@@ -247,7 +225,12 @@ def inventory_geojson(
         else:
             geometry = None
         features.append(
-            {"type": "Feature", "id": int(run.run_id), "geometry": geometry, "properties": row}
+            {
+                "type": "Feature",
+                "id": int(run.run_id),
+                "geometry": geometry,
+                "properties": row.to_record(),
+            }
         )
     return {
         "type": "FeatureCollection",
@@ -257,32 +240,64 @@ def inventory_geojson(
 
 
 def write_inventory_geojson(
-    path: Path, rows: Sequence[dict], runs: Sequence[RunModel], origin: np.ndarray, crs: str
+    path: Path, rows: Sequence[InventoryRow], runs: Sequence[RunModel], origin: np.ndarray, crs: str
 ) -> None:
     """Write :func:`inventory_geojson` to ``path``, whole or not at all (:func:`atomic_write`)."""
     text = json.dumps(inventory_geojson(rows, runs, origin, crs), indent=1, allow_nan=False)
     atomic_write(path, text + "\n", overwrite=True)
 
 
-def _cell(value) -> str:
-    if value is None:
-        return ""
-    if isinstance(value, list | dict):
-        return json.dumps(value, separators=(",", ":"))
-    return str(value)  # str(float) is repr: full float64 precision for map coordinates
-
-
-def write_inventory_csv(path: Path, rows: Sequence[dict]) -> None:
-    """Write the rows as CSV: a header (:data:`ROW_KEYS`, then any other keys), a line per row.
-
-    Lists and dicts (``design``) are written as compact JSON, None as an empty cell.
-    """
-    keys = list(ROW_KEYS)
-    for row in rows:
-        keys += [k for k in row if k not in keys]
+def write_inventory_csv(path: Path, rows: Sequence[InventoryRow]) -> None:
+    """Write the rows as CSV: a header (:data:`ROW_KEYS`), a line per row
+    (:meth:`InventoryRow.to_csv_cells`: None as an empty cell, ``design`` as compact JSON)."""
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
-    writer.writerow(keys)
+    writer.writerow(ROW_KEYS)
     for row in rows:
-        writer.writerow([_cell(row.get(k)) for k in keys])
+        writer.writerow(row.to_csv_cells())
     atomic_write(path, buffer.getvalue(), overwrite=True)
+
+
+def read_inventory_geojson(path: Path) -> list[InventoryRow]:
+    """The rows of an ``inventory.geojson`` (:func:`write_inventory_geojson`), in file order.
+
+    Raises
+    ------
+    RunFolderError
+        The file cannot be read, is not a FeatureCollection, or a feature's properties are
+        not a row (:meth:`InventoryRow.from_record`).
+    """
+    try:
+        document = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise RunFolderError(f"{path}: cannot be read as JSON ({exc})") from exc
+    features = document.get("features") if isinstance(document, dict) else None
+    if not isinstance(features, list) or not all(isinstance(f, dict) for f in features):
+        raise RunFolderError(f"{path}: expected a FeatureCollection with a 'features' list")
+    return [
+        InventoryRow.from_record(feature.get("properties"), f"{path}: feature {k}")
+        for k, feature in enumerate(features)
+    ]
+
+
+def read_inventory_csv(path: Path) -> list[InventoryRow]:
+    """The rows of an ``inventory.csv`` (:func:`write_inventory_csv`), in file order.
+
+    Raises
+    ------
+    RunFolderError
+        The file cannot be read, or a line is not a row (:meth:`InventoryRow.from_csv_record`).
+    """
+    try:
+        with Path(path).open(newline="", encoding="utf-8") as handle:
+            reader = csv.DictReader(handle)
+            missing = [key for key in ROW_KEYS if key not in (reader.fieldnames or ())]
+            if missing:
+                raise RunFolderError(f"{path}: the header lacks {', '.join(missing)}")
+            # Line 1 is the header: the first row is on line 2.
+            return [
+                InventoryRow.from_csv_record(record, f"{path}: line {k}")
+                for k, record in enumerate(reader, start=2)
+            ]
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise RunFolderError(f"{path}: cannot be read as CSV ({exc})") from exc

@@ -67,8 +67,7 @@ class ReconstructionParams(StageParams):
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> ReconstructionParams:
         """Parameters from :meth:`to_json` output (``{stage: {name: value}}``); missing stages
-        and names keep their defaults, names of earlier versions are read as today's (each
-        stage's ``renamed``).
+        and names keep their defaults.
 
         Raises
         ------

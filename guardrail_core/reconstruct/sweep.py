@@ -10,9 +10,7 @@ pole, y above the ground line, z toward the road; metres.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import ClassVar
 
 import numpy as np
 import trimesh
@@ -28,8 +26,6 @@ UNIT_TYPES = ("pipe", "beam")
 @dataclass(frozen=True)
 class SweepParams(StageParams):
     """How unit and run models become meshes."""
-
-    renamed: ClassVar[Mapping[str, str]] = {"beam_thickness": "beam_thickness_m"}
 
     tube_sections: int = param(12, ge=3, doc="Segments of a pipe's circle (the simulator's 12).")
     pole_sections: int = param(16, ge=3, doc="Segments of a pole's circle (the simulator's 16).")

@@ -99,7 +99,7 @@ def write_reconstruction(
         meshes = {run_id: mesh for run_id, (mesh, _) in made.items()}
         exported = {run_id: files for run_id, (_, files) in made.items()}
         mesh_files = write_meshes(layout.meshes_dir, meshes, exported=exported)
-    status = [row["status"] for row in rows]
+    status = [row.status for row in rows]
     written = [layout.models_file, layout.superimposed_file, layout.inventory_geojson]
     written += [layout.inventory_csv, *(layout.meshes_dir / f for f in mesh_files)]
     return ReconstructionSummary(

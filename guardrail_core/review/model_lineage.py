@@ -5,7 +5,7 @@ segment head of the model that made the run (what its training drives taught sta
 labels do not say otherwise), and every fine-tuning starts from that same model with every
 label so far: a chain of fine-tunings, each on the one before, drifts. A model is found by its
 version among the fine-tuned models the app saved (``REVIEW_DIR/models/<version>/``, model
-folders as :mod:`guardrail_core.extract.model_folder` writes them) and the shipped default
+folders as :mod:`guardrail_core.extract.classify.model_folder` writes them) and the shipped default
 model.
 """
 
@@ -16,7 +16,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from guardrail_core.extract.model_folder import DEFAULT_MODEL_DIR, MODEL_FILE
+from guardrail_core.extract.classify.model_folder import DEFAULT_MODEL_DIR, MODEL_FILE
 
 #: The folder, in a drive's review folder, where the app saves fine-tuned models.
 FINE_TUNED_MODELS_DIR = "models"

@@ -7,9 +7,9 @@ from those exactly as ``guardrail process`` cut it (:func:`~guardrail_core.extra
 cut_crops`), at any size. No crop is stored: a 3 km drive has some 57,000, a survey day millions.
 
 ``guardrail process`` asks the CNN only where a segment's shape leaves its label open
-(:mod:`guardrail_core.extract.segment_scores`), so the crops it did not ask have NaN rows in
-``embeddings.npy``. Retraining and re-predicting need every crop's embedding: the first time
-they do, the missing rows are computed from the crops (about 5 ms a crop on one core of the
+(:mod:`guardrail_core.extract.classify.segment_scores`), so the crops it did not ask have NaN
+rows in ``embeddings.npy``. Retraining and re-predicting need every crop's embedding: the first
+time they do, the missing rows are computed from the crops (about 5 ms a crop on one core of the
 development machine) and written back into the run, so that happens once per run.
 """
 
@@ -183,7 +183,7 @@ def complete_embeddings(
     MissingDriveFileError
         An image a missing row's crop lies in is missing or unreadable.
     """
-    from guardrail_core.extract.backbone import EMBEDDING_DIM, embed_crops  # torch
+    from guardrail_core.extract.classify.backbone import EMBEDDING_DIM, embed_crops  # torch
 
     stored = run.embeddings()
     if stored is None or stored.shape != (len(run), EMBEDDING_DIM):

@@ -2,12 +2,13 @@
 
 The operators label drive points (:mod:`guardrail_core.formats.label_store`); a segment of the run whose
 points carry operator labels takes their majority, every other segment keeps the run's corrected
-label (§3.3). A new model (crop classifier and segment head, :func:`train_on_set`; the head
+label (§3.3; :mod:`guardrail_core.review.training_labels`). A new model (crop classifier and
+segment head, :func:`~guardrail_core.extract.classify.model_training.train_on_set`; the head
 fine-tuned from the head of the model that made the run, where it is given) is trained on
 these labels, compared with the run's current model on the same held-out blocks of segments
 (against the operators' labels of the held-out segments they reviewed, when there are enough of
-them), and can then re-predict the run (:func:`predict_run`) and replace its predictions
-(:func:`write_predictions`).
+them), and can then re-predict the run and replace its predictions
+(:mod:`guardrail_core.review.predictions`).
 
 In fast mode the run's ``embeddings.npy`` stands in for the crops, so no image is decoded and the
 backbone never runs, but once per run for the crops ``guardrail process`` did not ask the CNN
@@ -15,8 +16,8 @@ about (:func:`~guardrail_core.review.run_crops.complete_embeddings`). Crops are 
 drive's images (``drive_root``, by default ``run.json``'s drive path). Measured on the
 development machine (2 shared CPU cores), fast mode, embeddings complete:
 :func:`train_from_run` on the test run (267 segments, 231 crops) 1.0-1.6 s, on the demo run
-(1,168 segments, 1,018 crops) 2-3 s, and :func:`train_on_set` on the demo set doubled (2,336
-segments, 2,036 crops) 3.2-3.6 s; :func:`predict_run` plus :func:`write_predictions` of the demo
+(1,168 segments, 1,018 crops) 2-3 s, and ``train_on_set`` on the demo set doubled (2,336
+segments, 2,036 crops) 3.2-3.6 s; ``predict_run`` plus ``write_predictions`` of the demo
 run 0.1 s.
 """
 
@@ -26,168 +27,33 @@ import dataclasses
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from guardrail_core.errors import InvalidOptionError, TrainingDataError
-from guardrail_core.extract.classifier_params import TRAINING_CLIP
-from guardrail_core.extract.classify import (
-    ClassifierParams,
-    GuardrailClassifier,
-    classification_metrics,
+from guardrail_core.extract.classify.crop_classifier import GuardrailClassifier
+from guardrail_core.extract.classify.crop_classifier_params import ClassifierParams
+from guardrail_core.extract.classify.crop_classifier_training import classification_metrics
+from guardrail_core.extract.classify.model_training import (
+    HOLD_OUT_BLOCK_SLICES,
+    TrainingSet,
+    train_on_set,
 )
-from guardrail_core.extract.correct import CorrectionParams, SegmentExtents, correct_labels
+from guardrail_core.extract.classify.segment_head import SegmentHead, SegmentHeadParams
 from guardrail_core.extract.crops import CROP_OK
-from guardrail_core.extract.segment_head import SegmentHead, SegmentHeadParams
-from guardrail_core.extract.segment_scores import (
-    ClassifyParams,
-    crops_to_ask,
-    fuse_scores,
-    weighed_crop_probability,
-)
-from guardrail_core.extract.training import HOLD_OUT_BLOCK_SLICES, TrainingSet, train_on_set
-from guardrail_core.formats.run_folder import SEGMENT_FIELDS, Run, load_run, replace_run_tables
-from guardrail_core.formats.run_info import ModelRef, Predicted
+from guardrail_core.formats.run_folder import Run
 from guardrail_core.review.run_crops import complete_embeddings, read_crops
+from guardrail_core.review.training_labels import operator_labels, training_rows
 
-__all__ = [
-    "ReviewTraining",
-    "contradicted_labels",
-    "effective_labels",
-    "predict_run",
-    "segment_labels",
-    "train_from_run",
-    "training_set_from_run",
-    "write_predictions",
-]
+__all__ = ["ReviewTraining", "train_from_run", "training_set_from_run"]
 
-#: Fields of segments.npz that :func:`predict_run` computes and :func:`write_predictions` replaces.
-PREDICTION_FIELDS = ("crop_probability", "probability", "raw_label", "label")
 MODES = ("fast", "full")
 #: ``"against"`` of :func:`train_from_run`'s metrics: the held-out segments an operator reviewed,
 #: their operator labels; or every held-out segment, the run's corrected label where not reviewed.
 AGAINST_OPERATOR = "operator labels"
 AGAINST_EFFECTIVE = "operator and corrected labels"
-
-
-def segment_labels(
-    point_segment: np.ndarray, n_segments: int, point_labels: np.ndarray
-) -> np.ndarray:
-    """Operator label of each segment from the labels of its points.
-
-    Parameters
-    ----------
-    point_segment : (N,) int, segment of every drive point; negative (road, off road) for none
-    n_segments : S, the number of segments
-    point_labels : (N,) int, operator label of every point: -1 none, 0 other, 1 guardrail
-
-    Returns
-    -------
-    (S,) int8 : -1 where none of the segment's points is labelled, else the majority of its
-        labelled points (1 when at least half of them are guardrail)
-    """
-    point_segment = np.asarray(point_segment)
-    point_labels = np.asarray(point_labels)
-    if not isinstance(n_segments, int | np.integer) or n_segments < 0:
-        raise InvalidOptionError(f"n_segments: expected a whole number >= 0, got {n_segments!r}")
-    if (
-        point_segment.ndim != 1
-        or point_labels.shape != point_segment.shape
-        or point_segment.dtype.kind not in "iu"
-        or point_labels.dtype.kind not in "iu"
-    ):
-        raise InvalidOptionError(
-            f"segment_labels: expected (N,) integer point_segment and point_labels of the same "
-            f"length, got {point_segment.shape} {point_segment.dtype} and {point_labels.shape} "
-            f"{point_labels.dtype} (a label store for another drive?)"
-        )
-    if len(point_segment) and point_segment.max() >= n_segments:
-        raise InvalidOptionError(
-            f"point_segment: expected segments below {n_segments}, got {point_segment.max()}"
-        )
-    if len(point_labels) and (point_labels.min() < -1 or point_labels.max() > 1):
-        raise InvalidOptionError(
-            f"point_labels: expected -1, 0 or 1, got values from {point_labels.min()} to "
-            f"{point_labels.max()}"
-        )
-    labelled = (point_segment >= 0) & (point_labels >= 0)
-    segment = point_segment[labelled]
-    n_labelled = np.bincount(segment, minlength=n_segments)
-    n_guardrail = np.bincount(segment, weights=point_labels[labelled] == 1, minlength=n_segments)
-    out = np.full(n_segments, -1, np.int8)
-    has = n_labelled > 0
-    out[has] = 2 * n_guardrail[has] >= n_labelled[has]
-    return out
-
-
-def effective_labels(
-    run: Run, point_labels: np.ndarray | None = None, *, operator_label: np.ndarray | None = None
-) -> tuple[np.ndarray, np.ndarray]:
-    """Labels to train on: the operators' where they reviewed, the run's corrected ones elsewhere.
-
-    Parameters
-    ----------
-    run : the run folder
-    point_labels : (N,) int8, operator label of every drive point (-1 none, 0 other, 1 guardrail),
-        :meth:`guardrail_core.formats.label_store.LabelStore.point_labels`
-    operator_label : or, instead, (S,) int8 the operators' label of every segment (-1 none;
-        :func:`segment_labels`), as the review app keeps them (it holds nothing per point)
-
-    Returns
-    -------
-    label : (S,) bool, True for guardrail
-    reviewed : (S,) bool, the segment has operator-labelled points
-    """
-    operator = _operator_label(run, point_labels, operator_label)
-    reviewed = operator >= 0
-    label = np.where(reviewed, operator == 1, np.asarray(run.segments["label"], bool))
-    return label, reviewed
-
-
-def contradicted_labels(
-    component: np.ndarray, label: np.ndarray, reviewed: np.ndarray
-) -> np.ndarray:
-    """(S,) bool: the unreviewed segments labelled otherwise than an operator labelled a segment
-    of their wireframe component.
-
-    An operator's labels are the only ones known right; the run's model labelled everything
-    else itself. Where its label of a slice disagrees with an operator's label on the same
-    component (§3.1: the same rail, fence or hedge, sliced), it is in doubt: a bar fence the
-    model called guardrail is guardrail on all its slices, and a rail it half missed is other on
-    the slices it missed. Trained on, those labels outvote the operator's few and the new model
-    learns the old one's mistakes again. They are left out of training, not relabelled: a
-    component can hold a rail and the hedge pressed against it.
-
-    Parameters
-    ----------
-    component : (S,) int, each segment's wireframe component (``segments.npz`` ``component``)
-    label, reviewed : (S,) bool, :func:`effective_labels` (the operators' label where reviewed,
-        the run's corrected label elsewhere)
-    """
-    label = np.asarray(label, bool)
-    reviewed = np.asarray(reviewed, bool)
-    _, component = np.unique(np.asarray(component), return_inverse=True)
-    n_components = int(component.max()) + 1 if len(component) else 0
-    said_guardrail = np.bincount(component[reviewed & label], minlength=n_components) > 0
-    said_other = np.bincount(component[reviewed & ~label], minlength=n_components) > 0
-    return ~reviewed & np.where(label, said_other[component], said_guardrail[component])
-
-
-def _training_rows(
-    run: Run, operator_label: np.ndarray, include_unreviewed: bool, leave_out_contradicted: bool
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-    """The segments to train on (K,) int64, the (S,) labels and reviewed flags of all of them
-    (:func:`effective_labels`), and how many unreviewed ones were left out as contradicted."""
-    label, reviewed = effective_labels(run, operator_label=operator_label)
-    if not include_unreviewed:
-        return np.flatnonzero(reviewed), label, reviewed, 0
-    left_out = np.zeros(len(run), bool)
-    if leave_out_contradicted:
-        left_out = contradicted_labels(run.segments["component"], label, reviewed)
-    return np.flatnonzero(~left_out), label, reviewed, int(left_out.sum())
 
 
 def training_set_from_run(
@@ -201,7 +67,8 @@ def training_set_from_run(
     input_size: int = 128,
     drive_root: str | Path | None = None,
 ) -> TrainingSet:
-    """The run's segments as a training set, labelled by :func:`effective_labels`.
+    """The run's segments as a training set, labelled by
+    :func:`~guardrail_core.review.training_labels.effective_labels`.
 
     Parameters
     ----------
@@ -212,7 +79,8 @@ def training_set_from_run(
         is read but for the rows the run lacks); "full" (or a run without embeddings): the crops
     include_unreviewed : False keeps only the segments the operators labelled
     leave_out_contradicted : leave out the unreviewed segments labelled otherwise than an
-        operator labelled a segment of their component (:func:`contradicted_labels`)
+        operator labelled a segment of their component
+        (:func:`~guardrail_core.review.training_labels.contradicted_labels`)
     input_size : px, the crops' size the model takes (that of the run's embeddings)
     drive_root : the drive folder the crops are cut from; None: ``run.json``'s drive path
 
@@ -234,8 +102,8 @@ def training_set_from_run(
     """
     if mode not in MODES:
         raise InvalidOptionError(f"mode: expected 'fast' or 'full', got {mode!r}")
-    operator_label = _operator_label(run, point_labels, operator_label)
-    rows, label, reviewed, n_left_out = _training_rows(
+    operator_label = operator_labels(run, point_labels, operator_label)
+    rows, label, reviewed, n_left_out = training_rows(
         run, operator_label, include_unreviewed, leave_out_contradicted
     )
     segments = run.segments
@@ -341,7 +209,8 @@ def train_from_run(
     include_unreviewed : train on every segment (the run's corrected label where not reviewed);
         False: only on the reviewed segments
     leave_out_contradicted : but not on the unreviewed segments labelled otherwise than an
-        operator labelled a segment of their wireframe component (:func:`contradicted_labels`);
+        operator labelled a segment of their wireframe component
+        (:func:`~guardrail_core.review.training_labels.contradicted_labels`);
         False trains on them too (README, "The review loop's learning curve": on four streets
         of a design the model never saw, guardrail F after 100 labels in the queue's order was
         0.005-0.050 higher without them)
@@ -399,7 +268,7 @@ def train_from_run(
     clock = time.perf_counter()
     if progress_fn is not None:
         progress_fn(0.0, "reading the run")
-    operator_label = _operator_label(run, point_labels, operator_label)  # worked out once
+    operator_label = operator_labels(run, point_labels, operator_label)  # worked out once
     data = training_set_from_run(
         run,
         operator_label=operator_label,
@@ -409,7 +278,7 @@ def train_from_run(
         input_size=params.input_size_px,
         drive_root=drive_root,
     )
-    rows, _, reviewed_all, n_left_out = _training_rows(
+    rows, _, reviewed_all, n_left_out = training_rows(
         run, operator_label, include_unreviewed, leave_out_contradicted
     )
     reviewed = reviewed_all[rows]
@@ -503,8 +372,9 @@ def _fine_tuning_head(
     """The segment head's parameters and the head to start from: ``start_from``'s own shape
     (members, width, its ignored features as recorded) with ``head``'s training settings;
     ``head`` and None where there is no head to start from. The new head reads the columns the
-    head to start from reads (:func:`~guardrail_core.extract.training.train_on_set`), which
-    for a model trained before chains are not those its ignored features would choose."""
+    head to start from reads
+    (:func:`~guardrail_core.extract.classify.model_training.train_on_set`), which for a model
+    trained before chains are not those its ignored features would choose."""
     if start_from is None or start_from.segment_head is None:
         return head, None
     saved = SegmentHeadParams.from_json(start_from.info.get("segment_head", {}).get("params", {}))
@@ -515,182 +385,6 @@ def _fine_tuning_head(
         ignored_features=saved.ignored_features,
     )
     return shaped, start_from.segment_head
-
-
-def predict_run(
-    run: Run,
-    model: GuardrailClassifier,
-    *,
-    correction: CorrectionParams | None = None,
-    drive_root: str | Path | None = None,
-) -> dict[str, np.ndarray]:
-    """Re-predict every segment of a run with ``model`` (the classify and correction stages).
-
-    A fast model classifies the run's stored ``embeddings.npy`` (float16, so with the run's own
-    model the crop probabilities agree with the pipeline's to about 2e-5, the segment
-    probabilities to about 5e-6 on the demo run); a full model, or a run without embeddings, runs
-    the network on the crops, cut from the drive's images as the pipeline cut them.
-
-    Parameters
-    ----------
-    run : the run folder
-    model : the classifier (with its segment head, if any)
-    correction : label correction rules; None takes the run's own (``params.correction``)
-    drive_root : the drive folder the crops are cut from; None: ``run.json``'s drive path
-
-    Returns
-    -------
-    dict
-        ``crop_probability`` (S,) float32 (NaN without a crop or not asked), ``probability`` (S,) float32,
-        ``raw_label`` (S,) bool (``probability >= threshold``, NaN counting as other),
-        ``label`` (S,) bool (corrected).
-
-    Raises
-    ------
-    MissingDriveFileError
-        An image a crop is cut from is missing or unreadable.
-    """
-    segments = run.segments
-    has_crop = segments["crop_status"] == CROP_OK
-    classify = _run_classify(run)
-    asked = crops_to_ask(model, segments["features"], has_crop, classify)
-    rows = np.flatnonzero(asked)
-    crop_probability = np.full(len(run), np.nan, np.float64)
-    if len(rows):
-        stored = None
-        if model.mode == "fast":
-            stored = complete_embeddings(run, model.input_size, rows=rows, drive_root=drive_root)
-        if stored is not None:
-            crop_probability[rows] = model.predict_proba(embeddings=stored[rows].astype(np.float32))
-        else:
-            crops = read_crops(run, rows, model.input_size, drive_root=drive_root)
-            crop_probability[rows] = model.predict_proba(crops)
-    probability, raw_label = fuse_scores(
-        model, segments["features"], has_crop, crop_probability, classify.crop_probability_clip
-    )
-    if correction is None:
-        correction = _run_correction(run)
-    extents = SegmentExtents(
-        segments["slice_index"],
-        segments["lateral"],
-        segments["height"],
-        segments["component"],
-        segments["n_points"],
-    )
-    weighed = weighed_crop_probability(
-        model, segments["features"], crop_probability, classify.crop_probability_clip
-    )
-    label = correct_labels(raw_label, extents, correction, probability, weighed)
-    out = {
-        "crop_probability": crop_probability,
-        "probability": probability,
-        "raw_label": raw_label,
-        "label": label,
-    }
-    return {name: out[name].astype(SEGMENT_FIELDS[name][0]) for name in PREDICTION_FIELDS}
-
-
-def write_predictions(
-    run_root: Path, predictions: dict[str, np.ndarray], model: GuardrailClassifier
-) -> None:
-    """Replace a run's predictions by those of another model, in place.
-
-    segments.npz's four fields (:data:`PREDICTION_FIELDS`), segments.csv and run.json's
-    ``model`` and counts (``guardrail_segments_raw``, ``guardrail_segments``,
-    ``guardrail_points``) are rewritten, each file atomically
-    (:func:`~guardrail_core.formats.run_folder.replace_run_tables`, run.json last). run.json keeps the
-    previous model under ``predicted.previous_model``; an existing reconstruction (made from the
-    old labels) is marked ``reconstruction.outdated`` until ``guardrail reconstruct`` runs again.
-
-    Parameters
-    ----------
-    run_root : the run folder
-    predictions : :func:`predict_run` of the run
-    model : the model that made them
-
-    Raises
-    ------
-    RunFolderError
-        Not a run folder.
-    InvalidOptionError
-        A prediction missing or of the wrong length; the run is left as it was.
-    """
-    run = load_run(run_root)
-    n = len(run)
-    for name in PREDICTION_FIELDS:
-        if name not in predictions or np.shape(predictions[name]) != (n,):
-            got = np.shape(predictions[name]) if name in predictions else "nothing"
-            raise InvalidOptionError(
-                f"predictions[{name!r}]: expected shape ({n},) for the run's segments, got {got}"
-            )
-    segments = dict(run.segments)
-    for name in PREDICTION_FIELDS:
-        segments[name] = np.asarray(predictions[name], SEGMENT_FIELDS[name][0])
-    previous = run.info.model
-    label = segments["label"]
-    counts = dataclasses.replace(
-        run.info.counts,
-        guardrail_segments_raw=int(segments["raw_label"].sum()),
-        guardrail_segments=int(label.sum()),
-        guardrail_points=int(segments["n_points"][label].sum()),
-    )
-    reconstruction = run.info.reconstruction
-    if reconstruction is not None:
-        reconstruction = dataclasses.replace(
-            reconstruction,
-            outdated=f"made from the labels of model {previous.version}; "
-            "run `guardrail reconstruct` again",
-        )
-    info = dataclasses.replace(
-        run.info,
-        model=ModelRef(version=model.version, mode=model.mode, threshold=model.threshold),
-        predicted=Predicted(
-            at=datetime.now(UTC).replace(microsecond=0).isoformat(), previous_model=previous
-        ),
-        counts=counts,
-        reconstruction=reconstruction,
-    )
-    replace_run_tables(run.root, segments=segments, info=info.to_json())
-
-
-# ---------------------------------------------------------------------------------------------
-# Helpers
-# ---------------------------------------------------------------------------------------------
-
-
-def _operator_label(
-    run: Run, point_labels: np.ndarray | None, operator_label: np.ndarray | None
-) -> np.ndarray:
-    """(S,) int8 the operators' label of every segment, from labels per point or per segment."""
-    if (point_labels is None) == (operator_label is None):
-        raise InvalidOptionError(
-            "expected the operators' labels per point (point_labels) or per segment "
-            "(operator_label), one of the two"
-        )
-    if point_labels is not None:
-        _check_point_labels(run, point_labels)
-        return segment_labels(run.point_segment, len(run), point_labels)
-    operator = np.asarray(operator_label)
-    if operator.shape != (len(run),) or operator.dtype.kind not in "iu":
-        raise InvalidOptionError(
-            f"operator_label: expected ({len(run)},) integer labels, one per segment of the run, "
-            f"got shape {operator.shape} dtype {operator.dtype} (labels of another run?)"
-        )
-    if len(operator) and (operator.min() < -1 or operator.max() > 1):
-        raise InvalidOptionError(
-            f"operator_label: expected -1, 0 or 1, got values from {operator.min()} to "
-            f"{operator.max()}"
-        )
-    return operator.astype(np.int8)
-
-
-def _check_point_labels(run: Run, point_labels: np.ndarray) -> None:
-    shape = np.shape(point_labels)
-    if shape != (len(run.point_segment),):
-        raise InvalidOptionError(
-            f"point_labels: expected ({len(run.point_segment)},) labels, one per point of the "
-            f"run's drive, got shape {shape} (labels of another drive?)"
-        )
 
 
 def _held_out_metrics(
@@ -723,37 +417,3 @@ def _current_raw_labels(run: Run) -> np.ndarray:
     """(S,) bool, the run's model's raw labels: ``probability >= threshold`` (NaN: other)."""
     probability = np.asarray(run.segments["probability"], np.float64)
     return np.nan_to_num(probability, nan=0.0) >= _run_threshold(run)
-
-
-def _run_classify(run: Run) -> ClassifyParams:
-    """The run's own classify parameters; a run from before shape-first asked every crop, and
-    one from before the crop probability clip gave the head the crops' probabilities as they
-    came."""
-    stored = run.info.params.get("classify")
-    if stored is None:
-        return ClassifyParams(shape_first=False, crop_probability_clip=TRAINING_CLIP)
-    return ClassifyParams.from_json({"crop_probability_clip": TRAINING_CLIP, **stored})
-
-
-def _run_correction(run: Run) -> CorrectionParams:
-    """The run's own correction rules; a run from before the fill floor filled by position
-    alone, one from before the rule of what stands behind a rail kept it, one from before
-    wide segments touching a rail's back kept them, one from before the crop veto kept
-    short components whatever their crops said, one from before the rules of long objects
-    kept their pieces called guardrail, one from before posts' stubs left them other, one
-    from before the rule of a hedge grown into a rail's back kept it, and one from before the
-    infill of a railing left the short pieces inside its slices as the classifier called them."""
-    before = {
-        "fill_min_probability": 0.0,
-        "behind_gap_m": float("inf"),
-        "behind_wide_m": float("inf"),
-        "crop_veto_max_slices": 0,
-        "object_window_slices": 0,
-        "inside_max_slices": 0,
-        "post_stub_gap_m": 0.0,
-        "behind_own_wide_m": float("inf"),
-        "infill_max_slices": 0,
-    }
-    stored = {**before, **(run.info.params.get("correction") or {})}
-    known = CorrectionParams.__dataclass_fields__
-    return CorrectionParams(**{k: v for k, v in stored.items() if k in known})

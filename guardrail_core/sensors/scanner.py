@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import Any
 
 import numpy as np
 
@@ -52,6 +52,15 @@ def azimuth_phase(direction: np.ndarray, bins: int = AZIMUTH_BINS) -> np.ndarray
 DEFAULT_MOUNT_POSITION_M = (-0.6, 0.0, 0.55)
 DEFAULT_MOUNT_RPY_DEG = (0.0, -45.0, 0.0)
 
+#: ``drive.json``'s keys for the scanner's rates and epoch -> the fields of
+#: :class:`ScannerParams`. The file has named them so since drive format 1.0 and keeps them
+#: (renaming a key is an incompatible change, a new major version); only the fields carry a unit.
+DRIVE_JSON_KEYS: Mapping[str, str] = {
+    "rotations_per_second": "rotation_rate_hz",
+    "measurements_per_second": "measurement_rate_hz",
+    "t0": "t0_s",
+}
+
 
 def scanner_mounting(
     position_m: tuple[float, float, float] = DEFAULT_MOUNT_POSITION_M,
@@ -73,12 +82,6 @@ class ScannerParams(StageParams):
     scanner frame the mirror turns about +x and the beam of phase p points along
     ``(0, cos a, sin a)`` with ``a = 2 pi p / points_per_rotation``.
     """
-
-    renamed: ClassVar[Mapping[str, str]] = {
-        "rotations_per_second": "rotation_rate_hz",
-        "measurements_per_second": "measurement_rate_hz",
-        "t0": "t0_s",
-    }
 
     rotation_rate_hz: float = param(
         100.0, unit="Hz", gt=0, le=1000, doc="turns of the mirror (or of the head) per second"
@@ -177,7 +180,7 @@ class ScannerParams(StageParams):
         return {
             "kind": self.kind,
             "rings": self.rings,
-            # drive.json keeps the key names of format 1.0 (a reader of 1.x expects them)
+            # the format's names for these three (DRIVE_JSON_KEYS), not the fields'
             "rotations_per_second": self.rotation_rate_hz,
             "measurements_per_second": self.measurement_rate_hz,
             "t0": self.t0_s,
@@ -190,9 +193,9 @@ class ScannerParams(StageParams):
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> ScannerParams:
-        """The scanner of a ``drive.json`` block (:meth:`to_json`); the format's key names
-        (``rotations_per_second``, ``measurements_per_second``, ``t0``) and the fields' own
-        names are both read. Absent ranges mean what they meant in format 1.0: no limit, 5 mm noise.
+        """The scanner of a ``drive.json`` block (:meth:`to_json`), under the format's key
+        names (:data:`DRIVE_JSON_KEYS`). Every key :meth:`to_json` writes is required but
+        ``beam_direction``, a note for people: drive format 2.0 has always written them all.
 
         Raises
         ------
@@ -201,18 +204,17 @@ class ScannerParams(StageParams):
         """
         if not isinstance(data, Mapping):
             raise DriveFormatError(f"drive.json: expected the scanner as an object, got {data!r}")
-        values = {cls.renamed.get(key, key): value for key, value in data.items()}
         try:
             return cls(
-                rotation_rate_hz=float(values["rotation_rate_hz"]),
-                measurement_rate_hz=float(values["measurement_rate_hz"]),
-                t0_s=float(values["t0_s"]),
-                range_noise_m=float(values.get("range_noise_m", 0.005)),
-                min_range_m=float(values.get("min_range_m", 0.0)),
-                max_range_m=float(values.get("max_range_m", np.inf)),
-                T_vehicle_scanner=np.asarray(values["T_vehicle_scanner"], np.float64),
-                kind=str(values.get("kind", PROFILE)),
-                rings=int(values.get("rings", 0)),
+                rotation_rate_hz=float(data["rotations_per_second"]),
+                measurement_rate_hz=float(data["measurements_per_second"]),
+                t0_s=float(data["t0"]),
+                range_noise_m=float(data["range_noise_m"]),
+                min_range_m=float(data["min_range_m"]),
+                max_range_m=float(data["max_range_m"]),
+                T_vehicle_scanner=np.asarray(data["T_vehicle_scanner"], np.float64),
+                kind=str(data["kind"]),
+                rings=int(data["rings"]),
             )
         except KeyError as exc:
             raise DriveFormatError(f"drive.json: scanner lacks the key {exc.args[0]!r}") from exc

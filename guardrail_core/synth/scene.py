@@ -24,6 +24,7 @@ from guardrail_core.sensors.scanner import (
     AZIMUTH_BINS,
     DEFAULT_MOUNT_POSITION_M,
     DEFAULT_MOUNT_RPY_DEG,
+    DRIVE_JSON_KEYS,
     MULTIBEAM,
     PROFILE,
     ScannerParams,
@@ -252,8 +253,11 @@ def _scanner(
             f"scanner.mounting.position_m: expected [x, y, z] metres, got {position}"
         )
     defaults = ScannerParams()
-    # Specs written before the rates carried their unit name them as drive format 1.1 did.
-    data = {ScannerParams.renamed.get(key, key): value for key, value in data.items()}
+    # A spec ignores keys it does not know, but drive.json's names of the rates (a drive's
+    # scanner block copied into a spec) would silently leave the defaults: refused instead.
+    for key in ("rotations_per_second", "measurements_per_second"):
+        if key in data:
+            raise SceneSpecError(f"scanner.{key}: a scene spec names it {DRIVE_JSON_KEYS[key]}")
     try:
         return ScannerParams(
             rotation_rate_hz=spec_value(

@@ -7,47 +7,14 @@ follow a length move with it when it is tuned.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import ClassVar
 
-from guardrail_core.params import StageParams, param
+from guardrail_core.params import Slider, StageParams, param
 
 
 @dataclass(frozen=True)
 class PipeParams(StageParams):
     """Thresholds of the pipe reconstruction (§4.3); see each field's ``doc`` (``specs()``)."""
-
-    renamed: ClassVar[Mapping[str, str]] = {
-        "pole_margin": "pole_margin_m",
-        "histogram_bin": "histogram_bin_m",
-        "vertical_min_length": "vertical_min_length_m",
-        "vertical_gap": "vertical_gap_m",
-        "vertical_sparse_gap": "vertical_sparse_gap_m",
-        "vertical_angle": "vertical_angle_deg",
-        "slice_interval": "slice_interval_m",
-        "max_edge": "max_edge_m",
-        "link_distance": "link_distance_m",
-        "link_gap": "link_gap_m",
-        "link_same_angle": "link_same_angle_deg",
-        "direction_window": "direction_window_m",
-        "straight_tolerance": "straight_tolerance_m",
-        "horizontal_angle": "horizontal_angle_deg",
-        "pole_extension": "pole_extension_m",
-        "join_distance": "join_distance_m",
-        "merge_gap": "merge_gap_m",
-        "merge_angle": "merge_angle_deg",
-        "min_length": "min_length_m",
-        "assign_margin": "assign_margin_m",
-        "measure_step": "measure_step_m",
-        "measure_stretch": "measure_stretch_m",
-        "short_window": "short_window_m",
-        "short_drift": "short_drift_m",
-        "line_band": "line_band_m",
-        "line_min_length": "line_min_length_m",
-        "line_chunk": "line_chunk_m",
-        "line_straightness": "line_straightness_m",
-    }
 
     # -- poles and the x histogram (§4.3, Fig. 14) ------------------------------------------------
     pole_margin_m: float = param(
@@ -63,6 +30,7 @@ class PipeParams(StageParams):
     histogram_factor: float = param(
         2.3,
         gt=0,
+        slider=Slider("histogram threshold (x median)", 1.0, 6.0, 0.1),
         doc="The histogram threshold is this times the median bin count (the level the "
         "horizontal pipes give everywhere), and at least histogram_min_count. An arch's 0.15 m "
         "king post peaks at 2.4x; 2.3 adds no other vertical pipe on the units-sweep street or "
@@ -79,6 +47,7 @@ class PipeParams(StageParams):
         0.94,
         gt=0,
         lt=1,
+        slider=Slider("share of points for the radius", 0.5, 0.99, 0.01),
         doc="The paper's 'certain percentage': the share of a pipe's points that its diameter "
         "holds. For offsets uniform on [-r, r] the central share spans 2 * share * r, so "
         "r = half-width / share; a pipe looked down on is measured from this span and the "
@@ -277,6 +246,7 @@ class PipeParams(StageParams):
         unit="m",
         ge=0.005,
         le=1.0,
+        slider=Slider("pipe slice interval (m)", 0.01, 0.1, 0.005),
         doc="Width of the slices along x (§4.3: 30 mm); below 5 mm a unit's slices hold too few "
         "points to fit, and the work grows without bound (1e-5 m took minutes and 4 GB).",
     )
@@ -358,7 +328,12 @@ class PipeParams(StageParams):
     # -- smoothing and shaping (§4.3) -------------------------------------------------------------
     taubin_lambda: float = param(0.5, gt=0, lt=1, doc="Taubin's shrinking factor.")
     taubin_mu: float = param(-0.53, lt=0, doc="Taubin's inflating factor, below -taubin_lambda.")
-    taubin_iterations: int = param(10, ge=0, doc="Taubin's filter iterations.")
+    taubin_iterations: int = param(
+        10,
+        ge=0,
+        doc="Taubin's filter iterations.",
+        slider=Slider("smoothing passes (Taubin)", 0, 40, 1),
+    )
     straight_tolerance_m: float = param(
         0.01,
         unit="m",
