@@ -9,7 +9,7 @@ DEMO_DRIVE ?= demo_output/sample_drive
 
 BROWSER := /usr/bin/chromium
 
-.PHONY: setup demo serve test lint bench clean browser
+.PHONY: setup demo serve test lint docs bench clean browser
 
 setup: $(STAMP)
 
@@ -54,6 +54,11 @@ lint: setup
 	$(BIN)/ruff format --check guardrail_core app tests benchmarks docs
 	$(BIN)/mypy
 
+# The documentation site; the tests build it too (tests/test_docs_reference.py).
+docs: setup
+	$(BIN)/sphinx-build -W --keep-going -q -b html docs docs/_build/html
+	@echo "open docs/_build/html/index.html"
+
 test: lint browser
 	$(BIN)/pytest -n 2 -q
 
@@ -65,4 +70,4 @@ bench: setup
 	$(BIN)/python benchmarks/bench_app.py --drive $(DEMO_DRIVE) --run $(dir $(DEMO_DRIVE))run
 
 clean:
-	rm -rf $(VENV) demo_output .pytest_cache .ruff_cache .mypy_cache
+	rm -rf $(VENV) demo_output .pytest_cache .ruff_cache .mypy_cache docs/_build
