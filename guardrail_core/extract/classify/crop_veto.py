@@ -13,7 +13,7 @@ from guardrail_core.extract.classify.label_correction_params import CorrectionPa
 from guardrail_core.extract.classify.segment_extents import (
     SegmentExtents,
     component_spans,
-    expand_ranges,
+    pairs_in_a_slice,
 )
 
 
@@ -56,13 +56,7 @@ def resting_on_rails(
         return np.zeros(n, bool)
     slice_index = np.asarray(extents.slice_index, np.int64)
     _, component = np.unique(np.asarray(extents.component), return_inverse=True)
-    hosts = np.flatnonzero(host)
-    hosts = hosts[np.argsort(slice_index[hosts], kind="stable")]
-    pieces = np.flatnonzero(piece)
-    lo = np.searchsorted(slice_index[hosts], slice_index[pieces], side="left")
-    hi = np.searchsorted(slice_index[hosts], slice_index[pieces], side="right")
-    owner, position = expand_ranges(lo, hi)
-    a, b = pieces[owner], hosts[position]
+    a, b = pairs_in_a_slice(slice_index, piece, host)
     margin = params.fill_margin_m
     gap = np.maximum(height[a, 0] - height[b, 1], height[b, 0] - height[a, 1])
     rests = (

@@ -103,3 +103,26 @@ def expand_ranges(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarra
     count = hi - lo
     owner = np.repeat(np.arange(len(lo)), count)
     return owner, np.arange(count.sum()) - np.repeat(np.cumsum(count) - count - lo, count)
+
+
+def pairs_in_a_slice(
+    slice_index: np.ndarray, piece: np.ndarray, host: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Every pair of a ``piece`` segment and a ``host`` segment of the same slice.
+
+    Parameters
+    ----------
+    slice_index : (S,) int64, each segment's slice
+    piece, host : (S,) bool, the segments on either side of a pair
+
+    Returns
+    -------
+    (P,) int64 piece indices and (P,) int64 host indices, pieces in order
+    """
+    hosts = np.flatnonzero(host)
+    hosts = hosts[np.argsort(slice_index[hosts], kind="stable")]
+    pieces = np.flatnonzero(piece)
+    lo = np.searchsorted(slice_index[hosts], slice_index[pieces], side="left")
+    hi = np.searchsorted(slice_index[hosts], slice_index[pieces], side="right")
+    owner, position = expand_ranges(lo, hi)
+    return pieces[owner], hosts[position]

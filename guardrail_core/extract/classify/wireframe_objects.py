@@ -15,6 +15,7 @@ from guardrail_core.extract.classify.segment_extents import (
     SegmentExtents,
     component_spans,
     expand_ranges,
+    pairs_in_a_slice,
 )
 
 
@@ -95,13 +96,7 @@ def within_in_slice(
     component = np.asarray(extents.component)
     lateral = np.asarray(extents.lateral, np.float64)
     height = np.asarray(extents.height, np.float64)
-    hosts = np.flatnonzero(host)
-    hosts = hosts[np.argsort(slice_index[hosts], kind="stable")]
-    pieces = np.flatnonzero(piece)
-    lo = np.searchsorted(slice_index[hosts], slice_index[pieces], side="left")
-    hi = np.searchsorted(slice_index[hosts], slice_index[pieces], side="right")
-    owner, position = expand_ranges(lo, hi)
-    a, b = pieces[owner], hosts[position]
+    a, b = pairs_in_a_slice(slice_index, piece, host)
     within = (
         (component[a] != component[b])
         & (lateral[a, 0] >= lateral[b, 0] - margin)
