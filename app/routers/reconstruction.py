@@ -66,6 +66,7 @@ def list_downloads(session: Session) -> dict[str, Any]:
     responses={**file_response(MEDIA_TYPES.values(), "the file"), **NOT_FOUND},
 )
 def get_download(session: Session, name: str) -> FileResponse:
+    """One file of ``/api/downloads``: a mesh or the inventory, by its name there."""
     path = downloadable(session.folder).get(name)
     if path is None:
         raise HTTPException(404, detail=f"no download {name!r}; see /api/downloads")

@@ -56,6 +56,7 @@ def list_jobs(jobs: Jobs, kind: str | None = None) -> dict[str, Any]:
     "/jobs/{job_id}", response_model=Job, response_model_exclude_unset=True, responses=NOT_FOUND
 )
 def get_job(jobs: Jobs, job_id: str) -> dict[str, Any]:
+    """One job: its state, its progress, and its result or error when it has ended."""
     job = jobs.get(job_id)
     if job is None:
         raise HTTPException(404, detail=f"no job {job_id}")

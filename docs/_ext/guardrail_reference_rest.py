@@ -95,14 +95,21 @@ def _content(content: dict[str, Any]) -> str:
     return "; ".join(parts)
 
 
+def first_sentence(operation: dict[str, Any]) -> str:
+    """What an operation does in one sentence: the first of its route's docstring, else
+    FastAPI's summary (made from the function's name, "Get Info")."""
+    description = " ".join((operation.get("description") or "").split())
+    if description:
+        end = description.find(". ")
+        return description if end < 0 else description[: end + 1]
+    return operation.get("summary", "")
+
+
 def operation_section(method: str, path: str, operation: dict[str, Any], level: int) -> str:
-    """One operation: its summary, description, parameters, request body and answers."""
+    """One operation: its description, parameters, request body and answers."""
     blocks = [heading(level, f"{method.upper()} `{path}`", label=operation_label(operation))]
-    summary = operation.get("summary", "")
     description = operation.get("description", "")
-    blocks.append(
-        f"**{prose(summary)}**. {prose(description)}\n" if summary else prose(description)
-    )
+    blocks.append(prose(description) if description else prose(operation.get("summary", "")))
     parameters = operation.get("parameters", [])
     if parameters:
         rows = [
@@ -161,10 +168,10 @@ def rest_reference(spec: dict[str, Any] | None = None, level: int = 2) -> str:
     ops = operations(spec)
     blocks = [heading(level, "Operations")]
     overview = [
-        [method.upper(), f"{{ref}}`{path} <{operation_label(op)}>`", prose(op.get("summary"))]
+        [method.upper(), f"{{ref}}`{path} <{operation_label(op)}>`", prose(first_sentence(op))]
         for method, path, op in ops
     ]
-    blocks.append(table(["Method", "Path", "Summary"], overview))
+    blocks.append(table(["Method", "Path", "What it does"], overview))
     tags: dict[str, list[tuple[str, str, dict[str, Any]]]] = {}
     for method, path, op in ops:
         tags.setdefault((op.get("tags") or ["other"])[0], []).append((method, path, op))
