@@ -148,6 +148,16 @@ def add_parser(subparsers: common.Subparsers) -> None:
         "(0-1) of a random scene's pipe railings, as along town kerbs (default 0)",
     )
     own.add_argument(
+        "--damage",
+        type=float,
+        default=0.0,
+        metavar="SHARE",
+        help="share (0-1) of a random scene's guardrail runs that are damaged: one to three of "
+        "dents (10-100 mm deep, 0.3-1.5 m long), bent (20-100 mm) or missing pipes, missing or "
+        "leaning (2-10 deg) posts, a rail lowered 10-80 mm by repaving, a missing or bent run "
+        "end; each recorded in truth/objects.json (default 0)",
+    )
+    own.add_argument(
         "--curb-height",
         type=float,
         metavar="METRES",
@@ -185,6 +195,7 @@ def run(args: argparse.Namespace) -> int:
             (args.medians != 0.0, "--medians"),
             (args.traffic != 0.0, "--traffic"),
             (args.young_trees != 0.0, "--young-trees"),
+            (args.damage != 0.0, "--damage"),
         ):
             if given:
                 print(
@@ -204,6 +215,7 @@ def run(args: argparse.Namespace) -> int:
             medians=args.medians,
             traffic=args.traffic,
             young_trees=args.young_trees,
+            damage=args.damage,
         )
     scanner = dict(spec.get("scanner") or {})
     if args.lidar is not None and args.scanner == "profile":

@@ -11,7 +11,15 @@ from __future__ import annotations
 import numpy as np
 
 from guardrail_core.classes import TruthClass
-from guardrail_core.geom.mesh import cylinder, dome, sweep, thick_outline, tube
+from guardrail_core.geom.mesh import cylinder, dome, grid_surface, sweep, thick_outline, tube
+from guardrail_core.synth.damage import (
+    Damage,
+    damage_record,
+    lean_rotation,
+    push_knots,
+    push_spans,
+    rail_push,
+)
 from guardrail_core.synth.designs import Design
 from guardrail_core.synth.materials import PAINTS
 from guardrail_core.synth.mesh import MeshBuilder
@@ -67,6 +75,7 @@ def build_guardrail_run(
     paint: str,
     object_id: int,
     builder: MeshBuilder,
+    damage: tuple[Damage, ...] = (),
 ) -> dict:
     """Add one guardrail run to ``builder`` and return its truth record.
 
@@ -83,6 +92,8 @@ def build_guardrail_run(
     object_id : int
         Written on every face and as the record's ``id``.
     builder : MeshBuilder
+    damage : tuple of :class:`~guardrail_core.synth.damage.Damage`, checked against this run
+        (indices of the undamaged run). The mesh is built damaged; see :func:`_damaged`.
 
     Returns
     -------
@@ -90,7 +101,10 @@ def build_guardrail_run(
         Plain-JSON truth record: ``id, kind='guardrail', design, type, paint, poles, units,
         pipes, beams, length``. Pipe ``axis`` and beam ``section``/``path``/``across`` are exactly
         the geometry the mesh was swept from. ``units[i].length`` is the 3-D distance between
-        the ground points; ``length`` is their sum.
+        the ground points; ``length`` is their sum. A damaged run's record also has ``damage``
+        (:func:`~guardrail_core.synth.damage.damage_record` per item); its poles and pipes are
+        those built (a missing post or pipe is absent, poles then carry their ``index``; a
+        leaning post has its ``axis``, a unit vector from its foot).
     """
     if paint not in PAINTS:
         raise ValueError(f"unknown paint {paint!r}; expected one of {sorted(PAINTS)}")
@@ -98,22 +112,12 @@ def build_guardrail_run(
     oid = int(object_id)
     pole_spec = design.pole
 
+    if damage:
+        return _damaged(design, poles, across, paint, oid, builder, tuple(damage))
+
     pole_records = []
     for p in poles:
-        top = p + pole_spec.height * _Z
-        builder.add(
-            cylinder(p, top, pole_spec.radius, sections=POLE_SECTIONS),
-            cls=TruthClass.GUARDRAIL_POLE,
-            object_id=oid,
-            material=paint,
-        )
-        if pole_spec.cap:
-            builder.add(
-                dome(top, pole_spec.radius, sections=POLE_SECTIONS),
-                cls=TruthClass.GUARDRAIL_POLE,
-                object_id=oid,
-                material=paint,
-            )
+        _add_pole(builder, design, p, None, paint, oid)
         pole_records.append(
             {
                 "position": p.tolist(),
@@ -183,3 +187,182 @@ def build_guardrail_run(
         "beams": beam_records,
         "length": float(sum(u["length"] for u in unit_records)),
     }
+
+
+def _add_pole(
+    builder: MeshBuilder,
+    design: Design,
+    foot: np.ndarray,
+    rotation: np.ndarray | None,
+    paint: str,
+    oid: int,
+) -> None:
+    """A post (and its cap) standing on ``foot`` (3,); ``rotation`` (3, 3) tilts it about its foot."""
+    spec = design.pole
+    top = foot + spec.height * _Z
+    meshes = [cylinder(foot, top, spec.radius, sections=POLE_SECTIONS)]
+    if spec.cap:
+        meshes.append(dome(top, spec.radius, sections=POLE_SECTIONS))
+    for vertices, faces in meshes:
+        if rotation is not None:
+            vertices = foot + (vertices - foot) @ rotation.T
+        builder.add((vertices, faces), cls=TruthClass.GUARDRAIL_POLE, object_id=oid, material=paint)
+
+
+def _damaged(
+    design: Design,
+    poles: np.ndarray,
+    across: np.ndarray,
+    paint: str,
+    oid: int,
+    builder: MeshBuilder,
+    damage: tuple[Damage, ...],
+) -> dict:
+    """:func:`build_guardrail_run` of a damaged run (``poles`` (P, 3), ``across`` (P, 3) toward
+    the road, checked).
+
+    A lowered run stands ``drop_m`` lower (its posts sunk, its rails lower above the ground); a
+    missing end loses its end unit and end post; a missing post or pipe is not built; a leaning
+    post is rotated about its foot; dents and a bent end push the rails away from the road
+    (:func:`~guardrail_core.synth.damage.rail_push`), sampled densely where they bend; a bent
+    pipe bows ``offset_m * sin(pi x / unit_length)`` across its unit.
+    """
+    spec = design.pole
+    n = len(poles)
+    poles = poles - sum(d.drop_m for d in damage if d.kind == "lowered") * _Z
+    pole_s = np.concatenate(
+        [[0.0], np.cumsum(np.linalg.norm(np.diff(poles[:, :2], axis=0), axis=1))]
+    )
+    along = np.gradient(poles, axis=0)
+    kept_units = list(range(n - 1))
+    kept_poles = list(range(n))
+    for d in damage:
+        if d.kind == "end_missing":
+            kept_units.remove(n - 2 if d.end == "last" else 0)
+            kept_poles.remove(n - 1 if d.end == "last" else 0)
+        elif d.kind == "missing_post":
+            kept_poles.remove(d.pole)
+    leans = {d.pole: (d.lean_deg, d.direction) for d in damage if d.kind == "leaning_post"}
+    for d in damage:
+        if d.kind == "end_damaged":  # the end post goes over with its rails
+            end = n - 1 if d.end == "last" else 0
+            leans[end] = (float(np.rad2deg(np.arctan2(d.offset_m, spec.height))), "away")
+
+    pole_records = []
+    for i in kept_poles:
+        rotation = None
+        record: dict = {"position": poles[i].tolist()}
+        if i in leans:
+            rotation = lean_rotation(*leans[i], along=along[i], away=-across[i])
+            record["axis"] = (rotation @ _Z).tolist()
+        _add_pole(builder, design, poles[i], rotation, paint, oid)
+        record.update({"radius": float(spec.radius), "height": float(spec.height)})
+        if len(kept_poles) < n:
+            record["index"] = i
+        pole_records.append(record)
+
+    pushed = tuple(d for d in damage if d.kind in ("dent", "end_damaged"))
+    missing = {(d.unit, d.pipe) for d in damage if d.kind == "missing_pipe"}
+    bent = {(d.unit, d.pipe): d for d in damage if d.kind == "bent_pipe"}
+    spans = push_spans(pushed, pole_s)
+    unit_records, pipe_records = [], []
+    for i in kept_units:
+        p0, p1 = poles[i], poles[i + 1]
+        # Only a unit the rails bend in is sampled densely (a pipe's points: a few metres).
+        pushed_here = any(lo < pole_s[i + 1] and hi > pole_s[i] for lo, hi in spans)
+        unit_records.append(
+            {
+                "index": i,
+                "start_pole": i,
+                "end_pole": i + 1,
+                "start": p0.tolist(),
+                "end": p1.tolist(),
+                "length": float(np.linalg.norm(p1 - p0)),
+            }
+        )
+        for j, pipe in enumerate(design.pipes):
+            if (i, j) in missing:
+                continue
+            points = pipe.points
+            if pushed_here or (i, j) in bent:
+                points = _resampled(points)
+            axis = _pipe_axis(points, p0, p1, design.unit_length)
+            if pushed_here or (i, j) in bent:
+                f = points[:, 0] / design.unit_length
+                away = -((1 - f)[:, None] * across[i] + f[:, None] * across[i + 1])
+                away /= np.linalg.norm(away, axis=1, keepdims=True)
+                push = rail_push(
+                    pushed, pole_s[i] + f * (pole_s[i + 1] - pole_s[i]), points[:, 1], pole_s
+                )
+                if (i, j) in bent:
+                    sign = 1.0 if bent[i, j].direction == "away" else -1.0
+                    push = push + sign * bent[i, j].offset_m * np.sin(np.pi * np.clip(f, 0, 1))
+                axis = axis + push[:, None] * away
+            builder.add(
+                tube(axis, pipe.radius, sections=PIPE_SECTIONS, caps=True),
+                cls=TruthClass.GUARDRAIL,
+                object_id=oid,
+                material=paint,
+            )
+            pipe_records.append(
+                {
+                    "unit": i,
+                    "pipe": j,
+                    "kind": pipe.kind,
+                    "axis": axis.tolist(),
+                    "radius": float(pipe.radius),
+                }
+            )
+
+    beam_records = []
+    first, last = kept_units[0], kept_units[-1] + 1
+    path, path_across = poles[first : last + 1], across[first : last + 1]
+    for beam in design.beams:
+        outline = thick_outline(beam.section, beam.thickness)
+        if pushed:  # sampled densely where the rails bend, each sample pushed away from the road
+            s = push_knots(pushed, pole_s[first : last + 1])
+            at = np.stack([np.interp(s, pole_s, poles[:, k]) for k in range(3)], axis=1)
+            toward = np.stack([np.interp(s, pole_s, across[:, k]) for k in range(3)], axis=1)
+            toward /= np.linalg.norm(toward, axis=1, keepdims=True)
+            push = rail_push(pushed, s[:, None], outline[None, :, 1], pole_s)
+            grid = (
+                at[:, None, :]
+                + (outline[None, :, 0] - push)[:, :, None] * toward[:, None, :]
+                + outline[None, :, 1:2] * _Z
+            )
+            mesh = grid_surface(grid)
+        else:
+            mesh = sweep(outline, path, path_across, np.broadcast_to(_Z, path.shape))
+        builder.add(mesh, cls=TruthClass.GUARDRAIL, object_id=oid, material=paint)
+        beam_records.append(
+            {
+                "section": beam.section.tolist(),
+                "path": path.tolist(),
+                "across": path_across.tolist(),
+                "thickness": float(beam.thickness),
+            }
+        )
+
+    return {
+        "id": oid,
+        "kind": "guardrail",
+        "design": design.name,
+        "type": design.type,
+        "paint": paint,
+        "poles": pole_records,
+        "units": unit_records,
+        "pipes": pipe_records,
+        "beams": beam_records,
+        "length": float(sum(u["length"] for u in unit_records)),
+        "damage": [damage_record(d, poles=poles, pole_s=pole_s, design=design) for d in damage],
+    }
+
+
+def _resampled(points: np.ndarray, step: float = 0.02) -> np.ndarray:
+    """A unit-coordinate polyline (K, 2) with points at most ``step`` metres apart (each
+    segment split evenly, so a straight rail keeps its midpoint)."""
+    out = [points[:1]]
+    for a, b in zip(points[:-1], points[1:], strict=True):
+        k = 2 * max(1, int(np.ceil(np.linalg.norm(b - a) / step / 2)))
+        out.append(a + np.linspace(0.0, 1.0, k + 1)[1:, None] * (b - a))
+    return np.concatenate(out)

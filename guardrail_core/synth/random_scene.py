@@ -13,6 +13,7 @@ from guardrail_core.synth.confounders import CONFOUNDER_KINDS
 from guardrail_core.synth.designs import list_designs, load_design
 from guardrail_core.synth.kerb_planting import add_kerb_planting
 from guardrail_core.synth.materials import PAINTS
+from guardrail_core.synth.random_damage import add_damage
 from guardrail_core.synth.road import SIDES
 from guardrail_core.synth.scene import DEFAULT_CRS, DEFAULT_ORIGIN
 from guardrail_core.synth.street_traffic import add_medians, add_traffic
@@ -59,6 +60,7 @@ def random_scene_spec(
     medians: float = 0.0,
     traffic: float = 0.0,
     young_trees: float = 0.0,
+    damage: float = 0.0,
 ) -> dict:
     """A random street ``length`` metres long (plus run-in and run-out) mixing every design and kind.
 
@@ -76,7 +78,8 @@ def random_scene_spec(
     second rail back to back and a hedge between (:func:`~.street_traffic.add_medians`);
     ``traffic`` (0-1): cars in the lanes beside the vehicle's (:func:`~.street_traffic.add_traffic`);
     ``young_trees`` (0-1): young trees and low hedges close behind that share of the pipe runs
-    (:func:`~.kerb_planting.add_kerb_planting`); each from a stream of its own.
+    (:func:`~.kerb_planting.add_kerb_planting`); ``damage`` (0-1): that share of the runs gets
+    one to three damage items (:func:`~.random_damage.add_damage`); each from a stream of its own.
     ``roadside``: the verges get embankments, ditches, hedges, shrubs and tall grass
     (:func:`_green_roadside`), drawn from a stream of their own: the road, guardrails and other
     objects are those of the same seed without them.
@@ -91,6 +94,7 @@ def random_scene_spec(
         ("--medians", medians),
         ("--traffic", traffic),
         ("--young-trees", young_trees),
+        ("--damage", damage),
     ):
         if not 0.0 <= share <= 1.0:
             raise SceneSpecError(f"{name}: a share from 0 to 1, got {share}")
@@ -236,6 +240,8 @@ def random_scene_spec(
         add_traffic(objects, road, vehicle_lane, span, traffic, np.random.default_rng([seed, 25]))
     if young_trees > 0:
         add_kerb_planting(guardrails, objects, young_trees, np.random.default_rng([seed, 26]))
+    if damage > 0:
+        add_damage(guardrails, damage, np.random.default_rng([seed, 27]))
     return {
         "name": f"random-{seed}",
         "crs": DEFAULT_CRS,

@@ -11,12 +11,13 @@ the whole road's mesh rows.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from guardrail_core.errors import SceneSpecError
 from guardrail_core.synth.confounders import CONFOUNDER_KINDS, build_confounder
+from guardrail_core.synth.damage import Damage, parse_damage
 from guardrail_core.synth.designs import Design, load_design, scaled_height
 from guardrail_core.synth.guardrail import build_guardrail_run
 from guardrail_core.synth.mesh import MeshBuilder, SceneMesh
@@ -119,6 +120,10 @@ def guardrail_parts(items: list, road: Road, seed: int, first_id: int) -> list[S
                 f"(0..{road.length:.1f} m)"
             )
         spec_paint(item, where, part_rng(seed, run.object_id))  # an unknown paint fails now
+        if "damage" in item:
+            units = int(np.floor(run.length / run.spacing + 1e-9))
+            damage = parse_damage(item["damage"], where, design, units, run.spacing)
+            run = replace(run, damage=damage)
         parts.append(ScenePart(where, run))
     return parts
 
@@ -208,6 +213,7 @@ class _GuardrailRun:
     length: float
     spacing: float
     facing: str = "road"
+    damage: tuple[Damage, ...] = ()
 
     def __call__(self, builder: MeshBuilder) -> dict:
         paint = spec_paint(self.item, self.where, part_rng(self.seed, self.object_id))
@@ -216,8 +222,19 @@ class _GuardrailRun:
         )
         if self.facing == "away":  # a median's far rail: its beams face the other carriageway
             toward_road = -toward_road
+        if self.damage and len(poles) != int(np.floor(self.length / self.spacing + 1e-9)) + 1:
+            raise SceneSpecError(  # the road ended before the run's length: indices would shift
+                f"{self.where}.damage: the run has {len(poles) - 1} units on the road, not the "
+                f"{self.length / self.spacing:.0f} its length holds"
+            )
         record = build_guardrail_run(
-            self.design, poles, toward_road, paint=paint, object_id=self.object_id, builder=builder
+            self.design,
+            poles,
+            toward_road,
+            paint=paint,
+            object_id=self.object_id,
+            builder=builder,
+            damage=self.damage,
         )
         record.update(
             {
