@@ -161,3 +161,8 @@ class ExportError(GuardrailError):
 
 class LabelsMismatchError(GuardrailError):
     """A hand-labels file does not belong to the frame it is used with."""
+
+
+class StandardError(GuardrailError):
+    """A guardrail standard profile (YAML) is unknown, malformed, lacks a key, or holds a value
+    out of range (a minimum above its maximum, a number that is not finite)."""
