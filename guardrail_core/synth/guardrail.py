@@ -175,18 +175,7 @@ def build_guardrail_run(
             }
         )
 
-    return {
-        "id": oid,
-        "kind": "guardrail",
-        "design": design.name,
-        "type": design.type,
-        "paint": paint,
-        "poles": pole_records,
-        "units": unit_records,
-        "pipes": pipe_records,
-        "beams": beam_records,
-        "length": float(sum(u["length"] for u in unit_records)),
-    }
+    return _truth_record(oid, design, paint, pole_records, unit_records, pipe_records, beam_records)
 
 
 def _add_pole(
@@ -343,19 +332,11 @@ def _damaged(
             }
         )
 
-    return {
-        "id": oid,
-        "kind": "guardrail",
-        "design": design.name,
-        "type": design.type,
-        "paint": paint,
-        "poles": pole_records,
-        "units": unit_records,
-        "pipes": pipe_records,
-        "beams": beam_records,
-        "length": float(sum(u["length"] for u in unit_records)),
-        "damage": [damage_record(d, poles=poles, pole_s=pole_s, design=design) for d in damage],
-    }
+    record = _truth_record(
+        oid, design, paint, pole_records, unit_records, pipe_records, beam_records
+    )
+    record["damage"] = [damage_record(d, poles=poles, pole_s=pole_s, design=design) for d in damage]
+    return record
 
 
 def _resampled(points: np.ndarray, step: float = 0.02) -> np.ndarray:
@@ -366,3 +347,27 @@ def _resampled(points: np.ndarray, step: float = 0.02) -> np.ndarray:
         k = 2 * max(1, int(np.ceil(np.linalg.norm(b - a) / step / 2)))
         out.append(a + np.linspace(0.0, 1.0, k + 1)[1:, None] * (b - a))
     return np.concatenate(out)
+
+
+def _truth_record(
+    oid: int,
+    design: Design,
+    paint: str,
+    poles: list[dict],
+    units: list[dict],
+    pipes: list[dict],
+    beams: list[dict],
+) -> dict:
+    """A guardrail run's entry of ``truth/objects.json`` (lengths in metres)."""
+    return {
+        "id": oid,
+        "kind": "guardrail",
+        "design": design.name,
+        "type": design.type,
+        "paint": paint,
+        "poles": poles,
+        "units": units,
+        "pipes": pipes,
+        "beams": beams,
+        "length": float(sum(u["length"] for u in units)),
+    }
